@@ -1,0 +1,1 @@
+"""MJCF scenes and assets, installed as ``lerobot_bboxpick.assets``."""

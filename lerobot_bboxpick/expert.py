@@ -1,0 +1,125 @@
+"""Scripted expert: privileged-state pick of the target brick, emitting the env's absolute action.
+
+Phases (paper section 4.3): from the start pose, approach above the target while turning the
+gripper top-down with its fingers across the brick's faces, descend, close, lift, and carry the brick
+back toward the start pose. Each segment is a minimum-jerk blend (position lerp + rotation slerp),
+so motions start and stop smoothly; per-episode speed and approach offsets come from a seeded rng.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from lerobot_bboxpick import geometry
+from lerobot_bboxpick.sim.env import _TOP_DOWN, LegoPickEnv
+
+GRASP_HEIGHT = 0.008  # TCP (fingertip) height above the brick's bottom face at the grasp
+PREGRASP_HEIGHT = 0.09
+LIFT_HEIGHT = 0.16
+OPEN_WIDTH = 0.075
+CLOSED_WIDTH = 0.0
+
+
+def min_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk time scaling of s in [0, 1]."""
+    return s**3 * (10 - 15 * s + 6 * s**2)
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """A TCP pose + gripper width to reach after ``duration`` seconds."""
+
+    T: np.ndarray
+    width: float
+    duration: float
+
+
+def grasp_rotation(brick_yaw: float, current_yaw: float = 0.0) -> np.ndarray:
+    """Top-down TCP rotation with the finger axis along one of the brick's faces.
+
+    A 2x2 brick is square, so yaws a quarter turn apart grasp alike: take the one nearest
+    ``current_yaw`` to spare the wrist.
+    """
+    k = np.round((current_yaw - brick_yaw) / (np.pi / 2))
+    yaw = brick_yaw + k * np.pi / 2
+    return Rotation.from_euler("z", yaw).as_matrix() @ _TOP_DOWN
+
+
+class ScriptedExpert:
+    """Plans a pick of ``env``'s target (or of ``brick``) at reset and replays it step by step."""
+
+    def __init__(self, rng: np.random.Generator | None = None, vary: bool = True) -> None:
+        self.rng = rng or np.random.default_rng(0)
+        self.vary = vary
+        self._actions: np.ndarray | None = None
+        self._i = 0
+
+    def plan(self, env: LegoPickEnv, brick: int | None = None) -> np.ndarray:
+        """Action sequence (N, 10) for picking ``brick`` (default: the target) from the current state."""
+        brick = env.target if brick is None else brick
+        rng = self.rng
+        speed = rng.uniform(0.85, 1.2) if self.vary else 1.0
+        offset = rng.uniform(-0.01, 0.01, size=2) if self.vary else np.zeros(2)
+        B = env.brick_pose(brick)
+        brick_yaw = float(np.arctan2(B[1, 0], B[0, 0]))
+        R_grasp = grasp_rotation(brick_yaw)
+        p = B[:3, 3]
+        T0 = env.tcp_pose()
+
+        def pose(xyz: np.ndarray, R: np.ndarray) -> np.ndarray:
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = R, xyz
+            return T
+
+        above = np.array([p[0] + offset[0], p[1] + offset[1], p[2] + PREGRASP_HEIGHT])
+        waypoints = [
+            Waypoint(pose(above, R_grasp), OPEN_WIDTH, 2.2 / speed),
+            Waypoint(
+                pose(np.array([p[0], p[1], p[2] + PREGRASP_HEIGHT * 0.5]), R_grasp), OPEN_WIDTH, 0.6 / speed
+            ),
+            Waypoint(pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp), OPEN_WIDTH, 0.9 / speed),
+            Waypoint(pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp), CLOSED_WIDTH, 0.6),
+            Waypoint(pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp), CLOSED_WIDTH, 0.25),
+            Waypoint(pose(np.array([p[0], p[1], LIFT_HEIGHT]), R_grasp), CLOSED_WIDTH, 1.2 / speed),
+            Waypoint(T0, CLOSED_WIDTH, 2.2 / speed),
+        ]
+        return self.through(T0, env.gripper_width(), waypoints, env.options.fps)
+
+    @staticmethod
+    def through(T0: np.ndarray, w0: float, waypoints: list[Waypoint], fps: int) -> np.ndarray:
+        """Actions (N, 10) at ``fps`` moving from (T0, w0) through the waypoints with min-jerk segments."""
+        actions = []
+        T_prev, w_prev = T0, w0
+        for wp in waypoints:
+            n = max(1, round(wp.duration * fps))
+            s = min_jerk(np.arange(1, n + 1) / n)
+            slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T_prev[:3, :3], wp.T[:3, :3]])))
+            R = slerp(s).as_matrix()
+            pos = T_prev[:3, 3] + s[:, None] * (wp.T[:3, 3] - T_prev[:3, 3])
+            width = w_prev + s * (wp.width - w_prev)
+            T = np.tile(np.eye(4), (n, 1, 1))
+            T[:, :3, :3], T[:, :3, 3] = R, pos
+            actions.append(np.concatenate([geometry.mat_to_pose9(T), width[:, None]], axis=1))
+            T_prev, w_prev = wp.T, wp.width
+        return np.concatenate(actions).astype(np.float32)
+
+    def reset(self, env: LegoPickEnv, brick: int | None = None) -> None:
+        """Plan the episode from the env's current (just reset) state."""
+        self._actions = self.plan(env, brick)
+        self._i = 0
+
+    @property
+    def done(self) -> bool:
+        """All planned actions were emitted."""
+        return self._actions is not None and self._i >= len(self._actions)
+
+    def act(self) -> np.ndarray:
+        """The next action (the last one again once the plan is finished)."""
+        if self._actions is None:
+            raise RuntimeError("call reset(env) before act()")
+        a = self._actions[min(self._i, len(self._actions) - 1)]
+        self._i += 1
+        return a

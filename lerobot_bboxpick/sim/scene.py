@@ -1,0 +1,209 @@
+"""The lego_pick MuJoCo model: the MJCF from ``envs/lego_pick`` plus twelve DUPLO bricks.
+
+The bricks are added here with ``mujoco.MjSpec`` from one brick definition rather than written out
+twelve times in XML; their poses and colours are set per episode by the layout and randomisation.
+``SceneIds`` gathers every index the rest of the simulator needs, so nobody looks names up twice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+
+import mujoco
+import numpy as np
+
+N_BRICKS = 12
+# DUPLO 2x2 brick (FACTS.md section 3): body 31.8 x 31.8 x 19.2 mm, studs 9.4 mm across and
+# 4.6 mm tall on a 16 mm pitch. The brick body frame is at the centre of its bottom face.
+BRICK_HALF = np.array([0.0159, 0.0159, 0.0096])
+STUD_RADIUS = 0.0047
+STUD_HEIGHT = 0.0046
+STUD_PITCH = 0.016
+BRICK_HEIGHT = 2 * BRICK_HALF[2]  # stacking height: the next brick's bottom rests on these studs
+BRICK_DENSITY = 300.0  # kg/m^3 of the solid box: about 6 g, like a (hollow) DUPLO brick
+
+# Twelve distinct colours; the names are used in the language task ("pick up the red block ...").
+BRICK_COLORS: dict[str, tuple[float, float, float]] = {
+    "red": (0.80, 0.08, 0.08),
+    "orange": (0.95, 0.45, 0.05),
+    "yellow": (0.95, 0.80, 0.05),
+    "lime": (0.60, 0.85, 0.15),
+    "green": (0.05, 0.50, 0.15),
+    "teal": (0.05, 0.60, 0.60),
+    "blue": (0.10, 0.30, 0.85),
+    "navy": (0.08, 0.10, 0.40),
+    "purple": (0.50, 0.15, 0.65),
+    "pink": (0.95, 0.45, 0.70),
+    "brown": (0.45, 0.25, 0.10),
+    "white": (0.92, 0.92, 0.90),
+}
+COLOR_NAMES: tuple[str, ...] = tuple(BRICK_COLORS)
+
+ARM_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+FINGER_JOINTS = ("finger_left_joint", "finger_right_joint")
+MAX_GRIPPER_WIDTH = 0.09
+WRIST_CAMERA = "wrist_wide"
+
+
+def asset_path(name: str) -> resources.abc.Traversable:
+    """Path of a file in the packaged ``envs/lego_pick`` folder."""
+    return resources.files("lerobot_bboxpick.assets") / "lego_pick" / name
+
+
+def _add_brick(spec: mujoco.MjSpec, index: int) -> None:
+    body = spec.worldbody.add_body(name=f"brick_{index}", pos=[0.3, 0.0, 0.05 * index])
+    body.add_freejoint(name=f"brick_{index}_joint")
+    common = {"condim": 4, "friction": [1.0, 0.02, 0.001], "density": BRICK_DENSITY}
+    body.add_geom(
+        name=f"brick_{index}_body",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=BRICK_HALF.tolist(),
+        pos=[0, 0, BRICK_HALF[2]],
+        **common,
+    )
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            body.add_geom(
+                name=f"brick_{index}_stud_{sx}{sy}",
+                type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                size=[STUD_RADIUS, STUD_HEIGHT / 2, 0],
+                pos=[sx * STUD_PITCH / 2, sy * STUD_PITCH / 2, BRICK_HEIGHT + STUD_HEIGHT / 2],
+                **common,
+            )
+
+
+def build_model() -> mujoco.MjModel:
+    """Compile the scene MJCF with the twelve bricks."""
+    with resources.as_file(asset_path("scene.xml")) as path:
+        spec = mujoco.MjSpec.from_file(str(path))
+    for i in range(N_BRICKS):
+        _add_brick(spec, i)
+    return spec.compile()
+
+
+def build_robot_model() -> mujoco.MjModel:
+    """The arm and gripper alone (no table, no bricks): the IK solver's model."""
+    with resources.as_file(asset_path("robot.xml")) as path:
+        return mujoco.MjModel.from_xml_path(str(path))
+
+
+def brick_silhouette_points() -> np.ndarray:
+    """Points, in the brick frame, whose projections bound the brick's image silhouette.
+
+    The body's twelve edges and the studs' top rims: a fisheye bends straight edges, so corners
+    alone would under-cover the curved outline.
+    """
+    t = np.linspace(0.0, 1.0, 7)
+    hx, hy, hz = BRICK_HALF
+    corners = np.array([[x, y, z] for x in (-hx, hx) for y in (-hy, hy) for z in (0.0, 2 * hz)])
+    edges = []
+    for a in range(8):
+        for b in range(a + 1, 8):
+            if np.count_nonzero(corners[a] != corners[b]) == 1:  # differ in one coordinate
+                edges.append(corners[a] + t[:, None] * (corners[b] - corners[a]))
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    rims = [
+        np.stack(
+            [
+                sx * STUD_PITCH / 2 + STUD_RADIUS * np.cos(ang),
+                sy * STUD_PITCH / 2 + STUD_RADIUS * np.sin(ang),
+                np.full_like(ang, BRICK_HEIGHT + STUD_HEIGHT),
+            ],
+            axis=1,
+        )
+        for sx in (-1, 1)
+        for sy in (-1, 1)
+    ]
+    return np.concatenate(edges + rims, axis=0)
+
+
+@dataclass(frozen=True)
+class SceneIds:
+    """Indices into a compiled lego_pick model."""
+
+    arm_qpos: np.ndarray  # (6,) qpos addresses of the arm joints
+    arm_dof: np.ndarray  # (6,) dof addresses of the arm joints
+    finger_qpos: np.ndarray  # (2,)
+    arm_actuators: np.ndarray  # (6,)
+    finger_actuators: np.ndarray  # (2,)
+    brick_bodies: np.ndarray  # (12,)
+    brick_qpos: np.ndarray  # (12,) start of each brick's 7-float freejoint qpos
+    brick_dof: np.ndarray  # (12,) start of each brick's 6 dofs
+    brick_geoms: tuple[np.ndarray, ...]  # geoms of each brick (body + studs)
+    brick_of_geom: np.ndarray  # (ngeom,) brick index of a geom, -1 when not a brick
+    gripper_geoms: np.ndarray  # every geom of the gripper and fingers
+    pad_geoms: np.ndarray  # (2,) left and right finger pads
+    finger_geoms: tuple[np.ndarray, np.ndarray]  # geoms of the left / right finger
+    tcp_site: int
+    camera_site: int
+    camera: int
+    table_geom: int
+
+    @staticmethod
+    def of(model: mujoco.MjModel) -> SceneIds:
+        """Look up every index once."""
+
+        def jid(name: str) -> int:
+            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+
+        def bid(name: str) -> int:
+            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+
+        def gid(name: str) -> int:
+            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+
+        def aid(name: str) -> int:
+            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+
+        arm_j = [jid(n) for n in ARM_JOINTS]
+        bricks = np.array([bid(f"brick_{i}") for i in range(N_BRICKS)])
+        brick_j = [jid(f"brick_{i}_joint") for i in range(N_BRICKS)]
+        brick_of_geom = np.full(model.ngeom, -1)
+        brick_geoms = []
+        for i, b in enumerate(bricks):
+            geoms = np.flatnonzero(model.geom_bodyid == b)
+            brick_of_geom[geoms] = i
+            brick_geoms.append(geoms)
+
+        def geoms_of_subtree(root: str) -> np.ndarray:
+            root_id = bid(root)
+            bodies = [b for b in range(model.nbody) if _is_descendant(model, b, root_id)]
+            return np.flatnonzero(np.isin(model.geom_bodyid, bodies))
+
+        return SceneIds(
+            arm_qpos=model.jnt_qposadr[arm_j].copy(),
+            arm_dof=model.jnt_dofadr[arm_j].copy(),
+            finger_qpos=model.jnt_qposadr[[jid(n) for n in FINGER_JOINTS]].copy(),
+            arm_actuators=np.array(
+                [aid(n) for n in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")]
+            ),
+            finger_actuators=np.array([aid("finger_left"), aid("finger_right")]),
+            brick_bodies=bricks,
+            brick_qpos=model.jnt_qposadr[brick_j].copy(),
+            brick_dof=model.jnt_dofadr[brick_j].copy(),
+            brick_geoms=tuple(brick_geoms),
+            brick_of_geom=brick_of_geom,
+            gripper_geoms=geoms_of_subtree("gripper"),
+            pad_geoms=np.array([gid("finger_left_pad"), gid("finger_right_pad")]),
+            finger_geoms=(geoms_of_subtree("finger_left"), geoms_of_subtree("finger_right")),
+            tcp_site=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tcp"),
+            camera_site=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "camera"),
+            camera=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, WRIST_CAMERA),
+            table_geom=gid("table"),
+        )
+
+
+def _is_descendant(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = model.body_parentid[body]
+    return root == 0
