@@ -3,7 +3,13 @@
 Importing the package registers its components with LeRobot: the ``lego_pick`` env config.
 """
 
-from lerobot_bboxpick.env_config import LegoPickEnvConfig
+import os
+
+# Headless rendering with Mesa's EGL (FACTS.md section 3). It must be set before mujoco is first
+# imported anywhere in the process, and every sim module is reached through this package.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from lerobot_bboxpick.env_config import LegoPickEnvConfig  # noqa: E402
 
 __all__ = ["LegoPickEnvConfig"]
 __version__ = "0.1.0"

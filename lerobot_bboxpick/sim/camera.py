@@ -53,16 +53,20 @@ class FisheyeLens:
         dx = (pixels[:, 0] - self.cx) / self.f
         dy = (pixels[:, 1] - self.cy) / self.f
         theta_d = np.hypot(dx, dy)
-        theta = theta_d.copy()
+        # Start from a table of the monotonic part of the polynomial (a few degrees past what the
+        # GoPro sees), then polish with Newton steps.
+        grid = np.linspace(0.0, np.pi, 4001)
+        table = self.distort(grid)
+        monotonic = np.argmax(np.diff(table) <= 0) if np.any(np.diff(table) <= 0) else len(grid) - 1
+        grid, table = grid[: monotonic + 1], table[: monotonic + 1]
+        theta = np.interp(theta_d, table, grid)
         k1, k2, k3, k4 = self.k
-        for _ in range(20):
+        for _ in range(3):
             t2 = theta * theta
-            residual = self.distort(theta) - theta_d
             slope = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
-            theta = theta - residual / slope
-        # Far past the calibrated range the polynomial stops being monotonic: mark those rays invalid.
-        bad = (np.abs(self.distort(theta) - theta_d) > 1e-6) | (theta < 0) | (theta > np.pi)
-        theta[bad] = np.nan
+            theta = np.clip(theta - (self.distort(theta) - theta_d) / slope, 0.0, grid[-1])
+        # Past the polynomial's peak a pixel has no ray: mark those invalid.
+        theta[(theta_d > table[-1]) | (np.abs(self.distort(theta) - theta_d) > 1e-6)] = np.nan
         s = np.where(theta_d > 1e-12, np.sin(theta) / np.maximum(theta_d, 1e-12), 1.0)
         rays = np.stack([dx * s, dy * s, np.cos(theta)], axis=1)
         return rays, theta
@@ -100,7 +104,7 @@ class FisheyeWarp:
 
     lens: FisheyeLens
     render_size: int = 512
-    fovy_deg: float = 150.0
+    fovy_deg: float = 140.0
     map_x: np.ndarray = field(init=False, repr=False)
     map_y: np.ndarray = field(init=False, repr=False)
     valid: np.ndarray = field(init=False, repr=False)
@@ -170,13 +174,19 @@ class WristCamera:
         camera_site: int,
         lens: FisheyeLens,
         render_size: int = 512,
-        fovy_deg: float = 150.0,
+        fovy_deg: float = 140.0,
+        segmentation_supersample: int = 3,
     ) -> None:
         model.cam_fovy[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)] = fovy_deg
         self.camera = camera
         self.camera_site = camera_site
         self.lens = lens
         self.warp = FisheyeWarp(lens, render_size=render_size, fovy_deg=fovy_deg)
+        # Segmentation is a check of the image (tests, masks), so it renders finer than the RGB view:
+        # nearest-neighbour labels from a coarse render would move object edges by up to a pixel.
+        self.segmentation_warp = FisheyeWarp(
+            lens, render_size=render_size * segmentation_supersample, fovy_deg=fovy_deg
+        )
         self._renderer = mujoco.Renderer(model, height=render_size, width=render_size)
         self._seg_renderer: mujoco.Renderer | None = None
         self._model = model
@@ -194,14 +204,13 @@ class WristCamera:
     def render_geom_ids(self, data: mujoco.MjData) -> np.ndarray:
         """(H, W) int32 geom id of each fisheye pixel, -1 for background."""
         if self._seg_renderer is None:
-            self._seg_renderer = mujoco.Renderer(
-                self._model, height=self.warp.render_size, width=self.warp.render_size
-            )
+            size = self.segmentation_warp.render_size
+            self._seg_renderer = mujoco.Renderer(self._model, height=size, width=size)
             self._seg_renderer.enable_segmentation_rendering()
         self._seg_renderer.update_scene(data, camera=self.camera)
         seg = self._seg_renderer.render()
         ids = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
-        return self.warp.warp_labels(ids)
+        return self.segmentation_warp.warp_labels(ids)
 
     def world_to_camera(self, data: mujoco.MjData, points_world: np.ndarray) -> np.ndarray:
         """World points (N,3) into the OpenCV camera frame (the camera site's axes are x right, y down,
@@ -233,8 +242,11 @@ class WristCamera:
             return BoxProjection(np.zeros(4, dtype=np.float32), "none")
         front = theta < self.warp.max_theta
         pts = pixels[front] + 0.5  # pixel-edge coordinates: the image spans [0, w]
-        x0, y0 = np.clip(pts.min(axis=0), 0, [w, h])
-        x1, y1 = np.clip(pts.max(axis=0), 0, [w, h])
+        # Snap to pixel edges: a pixel belongs to the object when its centre is inside the outline,
+        # so the box of the object's pixels runs from round(min) to round(max) (what an annotator or
+        # a tracker would draw on this image).
+        x0, y0 = np.clip(np.round(pts.min(axis=0)), 0, [w, h])
+        x1, y1 = np.clip(np.round(pts.max(axis=0)), 0, [w, h])
         bbox = np.array([x0 / w, y0 / h, x1 / w, y1 / h], dtype=np.float32)
         return BoxProjection(bbox, "full" if in_image.all() else "partial")
 

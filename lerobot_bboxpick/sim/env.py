@@ -8,12 +8,9 @@ Each step runs mink IK once and drives the joint position actuators over the phy
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
-
-os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering (FACTS.md section 3); before mujoco
 
 import cv2
 import gymnasium as gym
@@ -86,7 +83,7 @@ class LegoPickOptions:
     fps: int = 20
     lens: str = "gopro_hero10"
     render_size: int = 512
-    render_fovy_deg: float = 150.0
+    render_fovy_deg: float = 140.0
     domain_randomization: bool = True
     terminate_on_lift: bool = True
     start_jitter: bool = True
@@ -101,7 +98,8 @@ class LegoPickEnv(gym.Env):
         unknown = set(options) - set(LegoPickOptions.__dataclass_fields__)
         if unknown:
             raise TypeError(
-                f"unknown LegoPickEnv option(s) {sorted(unknown)}; valid: {sorted(LegoPickOptions.__dataclass_fields__)}"
+                f"unknown LegoPickEnv option(s) {sorted(unknown)}; "
+                f"valid: {sorted(LegoPickOptions.__dataclass_fields__)}"
             )
         self.options = LegoPickOptions(**options)
         check_setting(self.options.setting)
@@ -287,7 +285,8 @@ class LegoPickEnv(gym.Env):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (ACTION_DIM,):
             raise ValueError(
-                f"action must have shape ({ACTION_DIM},) = position(3) + rot6d(6) + gripper width(1), got {a.shape}"
+                f"action must have shape ({ACTION_DIM},) = position(3) + rot6d(6) + gripper width(1), "
+                f"got {a.shape}"
             )
         if not np.all(np.isfinite(a)):
             bad = [i for i in range(ACTION_DIM) if not np.isfinite(a[i])]
