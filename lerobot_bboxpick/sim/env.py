@@ -45,6 +45,7 @@ START_GRIPPER_WIDTH = 0.08
 # Arm posture the start-pose IK begins from (elbow up, wrist down).
 _IK_SEED = np.array([-np.pi, -1.9, 1.9, -1.57, -1.5708, 0.0])
 SETTLE_SECONDS = 0.3
+RAMP_STAGES = 5  # joint-target ramp stages per control period
 
 
 def start_rotation(pitch_deg: float = START_PITCH_DEG) -> np.ndarray:
@@ -121,6 +122,8 @@ class LegoPickEnv(gym.Env):
         self.controller = TcpIkController(np.array(_start_joint_angles()))
         self.randomizer = Randomizer(self.model, self.ids, enabled=self.options.domain_randomization)
         self.n_substeps = max(1, round(1.0 / (self.options.fps * self.model.opt.timestep)))
+        stages = min(RAMP_STAGES, self.n_substeps)
+        self._ramp = [len(c) for c in np.array_split(np.arange(self.n_substeps), stages)]
         self._silhouette = brick_silhouette_points()
         self._max_episode_steps = self.options.episode_length
 
@@ -251,11 +254,12 @@ class LegoPickEnv(gym.Env):
         width = float(np.clip(width, 0.0, MAX_GRIPPER_WIDTH))
         ik = self.controller.solve(self._q_cmd, T)
         q_from, w_from = self._q_cmd, self._width_cmd
-        for k in range(1, self.n_substeps + 1):
-            # Ramp the joint targets over the control period: smooth torques, no step jumps.
-            a = k / self.n_substeps
+        for k, nstep in enumerate(self._ramp, start=1):
+            # Ramp the joint targets over the control period in a few stages: smooth torques,
+            # no step jumps; outcome contacts are read after every stage (every 10 ms).
+            a = k / len(self._ramp)
             self._write_ctrl(q_from + a * (ik.q_arm - q_from), w_from + a * (width - w_from))
-            mujoco.mj_step(self.model, self.data)
+            mujoco.mj_step(self.model, self.data, nstep=nstep)
             self._tracker.update(self.data)
         self._q_cmd, self._width_cmd = ik.q_arm, width
         self._steps += 1

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lerobot_bboxpick.sim.scene import BRICK_HALF, BRICK_HEIGHT, COLOR_NAMES, N_BRICKS, STUD_HEIGHT
+from lerobot_bboxpick.sim.scene import BRICK_HALF, BRICK_HEIGHT, COLOR_NAMES, N_BRICKS
 
 SETTINGS: tuple[str, ...] = ("grid_id", "grid_ood", "pile_id", "random_id", "identical_2", "identical_4")
 
@@ -87,7 +87,7 @@ def _pile(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     top_local = top_cells * pitch * 0.75 + rng.uniform(-0.003, 0.003, size=(n_top, 2))
     local = np.concatenate([cells * pitch + rng.uniform(-0.0005, 0.0005, size=cells.shape), top_local])
     xy = center + local @ rot.T
-    z = np.concatenate([np.zeros(len(cells)), np.full(n_top, BRICK_HEIGHT + STUD_HEIGHT)])
+    z = np.concatenate([np.zeros(len(cells)), np.full(n_top, BRICK_HEIGHT)])
     yaws = theta + np.concatenate(
         [rng.uniform(-0.02, 0.02, len(cells)), rng.uniform(-np.radians(20), np.radians(20), n_top)]
     )

@@ -20,7 +20,7 @@ BRICK_HALF = np.array([0.0159, 0.0159, 0.0096])
 STUD_RADIUS = 0.0047
 STUD_HEIGHT = 0.0046
 STUD_PITCH = 0.016
-BRICK_HEIGHT = 2 * BRICK_HALF[2]  # stacking height: the next brick's bottom rests on these studs
+BRICK_HEIGHT = 2 * BRICK_HALF[2]  # stacking height: a stacked brick's bottom rests here
 BRICK_DENSITY = 300.0  # kg/m^3 of the solid box: about 6 g, like a (hollow) DUPLO brick
 
 # Twelve distinct colours; the names are used in the language task ("pick up the red block ...").
@@ -69,6 +69,9 @@ def _add_brick(spec: mujoco.MjSpec, index: int) -> None:
         pos=[0, 0, BRICK_HALF[2]],
         **common,
     )
+    # Studs are seen, not touched: a brick stacked on another sits on its body (the studs go into
+    # the hollow underside, as real DUPLO interlocks), and cylinder contacts would cost more physics
+    # time per step than everything else in the env.
     for sx in (-1, 1):
         for sy in (-1, 1):
             body.add_geom(
@@ -76,7 +79,9 @@ def _add_brick(spec: mujoco.MjSpec, index: int) -> None:
                 type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                 size=[STUD_RADIUS, STUD_HEIGHT / 2, 0],
                 pos=[sx * STUD_PITCH / 2, sy * STUD_PITCH / 2, BRICK_HEIGHT + STUD_HEIGHT / 2],
-                **common,
+                contype=0,
+                conaffinity=0,
+                density=BRICK_DENSITY,
             )
 
 
@@ -145,7 +150,8 @@ class SceneIds:
     tcp_site: int
     camera_site: int
     camera: int
-    table_geom: int
+    table_geom: int  # the drawn table (its material is randomised)
+    table_top_geom: int  # the collision plane of the table top
 
     @staticmethod
     def of(model: mujoco.MjModel) -> SceneIds:
@@ -198,6 +204,7 @@ class SceneIds:
             camera_site=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "camera"),
             camera=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, WRIST_CAMERA),
             table_geom=gid("table"),
+            table_top_geom=gid("table_top"),
         )
 
 

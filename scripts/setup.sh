@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Idempotent set-up, sourced by scripts/main.sh and scripts/test.sh:
+#   - Debian's Mesa EGL libraries for headless MuJoCo rendering (installed when missing and root),
+#   - a Python 3.12 (on PATH, or pyenv's installed 3.12),
+#   - .venv with this project installed (editable, with the dev extras); re-installed only when
+#     pyproject.toml changed since the last install.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+egl_present() { ldconfig -p 2>/dev/null | grep -q "libEGL_mesa.so" && ldconfig -p | grep -q "libgbm.so"; }
+if ! egl_present; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
+    echo "[setup] installing Mesa EGL packages (headless rendering)"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 >/dev/null
+  else
+    echo "[setup] WARNING: Mesa EGL libraries missing and not root: install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1" >&2
+  fi
+fi
+
+find_python() {
+  for candidate in python3.12 python3; do
+    if command -v "$candidate" >/dev/null && "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))' 2>/dev/null; then
+      command -v "$candidate"; return 0
+    fi
+  done
+  local pyenv_root="${PYENV_ROOT:-$HOME/.pyenv}"
+  command -v pyenv >/dev/null && pyenv_root="$(pyenv root)"
+  for p in "$pyenv_root"/versions/3.12.*/bin/python3; do
+    [ -x "$p" ] && { echo "$p"; return 0; }
+  done
+  return 1
+}
+
+if [ ! -x .venv/bin/python ]; then
+  PY="$(find_python)" || { echo "[setup] ERROR: no Python 3.12 found (LeRobot 0.6.1 needs >= 3.12)" >&2; exit 1; }
+  echo "[setup] creating .venv with $PY"
+  "$PY" -m venv .venv
+fi
+
+stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
+if [ ! -f "$stamp" ]; then
+  echo "[setup] installing the project into .venv (first time: several GB, a few minutes)"
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -e ".[dev]"
+  rm -f .venv/.installed-*
+  touch "$stamp"
+fi
+export MUJOCO_GL=egl
+export PATH="$ROOT/.venv/bin:$PATH"
