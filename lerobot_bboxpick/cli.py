@@ -1,4 +1,4 @@
-"""``lerobot_bboxpick`` command: ``demo`` (the main job), ``bench`` (benchmarks), ``sheet`` (settings picture)."""
+"""The ``lerobot_bboxpick`` command: ``demo`` (the main job), ``bench``, ``sheet`` (settings picture)."""
 
 from __future__ import annotations
 
