@@ -198,7 +198,12 @@ class LegoPickEnv(gym.Env):
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """New scene from ``seed``. ``options`` may hold ``layout`` (a Layout) or ``target`` (an index)."""
+        """New scene from ``seed``.
+
+        ``options`` may hold ``layout`` (a Layout to use instead of the seed's), ``target`` (a brick
+        index to designate instead) and ``start_pose`` (a 4x4 TCP pose to start from instead of the
+        seed's jittered start pose; e.g. to replay a mirrored episode).
+        """
         super().reset(seed=seed)
         options = options or {}
         if seed is None:
@@ -220,12 +225,22 @@ class LegoPickEnv(gym.Env):
             self.data.qpos[adr : adr + 3] = layout.positions[i]
             self.data.qpos[adr + 3 : adr + 7] = [np.cos(layout.yaws[i] / 2), 0, 0, np.sin(layout.yaws[i] / 2)]
         q_start = np.array(_start_joint_angles())
+        T_start = geometry.pose9_to_mat(start_pose10()[:9])
         if self.options.start_jitter:
             # Small seeded variation of the start pose so demonstrations do not all begin alike.
-            T = geometry.pose9_to_mat(start_pose10()[:9])
-            T[:3, 3] += rng.uniform(-0.015, 0.015, size=3)
-            T[:3, :3] = Rotation.from_rotvec(rng.uniform(-0.05, 0.05, size=3)).as_matrix() @ T[:3, :3]
-            q_start = self.controller.solve(q_start, T).q_arm
+            T_start[:3, 3] += rng.uniform(-0.015, 0.015, size=3)
+            T_start[:3, :3] = (
+                Rotation.from_rotvec(rng.uniform(-0.05, 0.05, size=3)).as_matrix() @ T_start[:3, :3]
+            )
+        if "start_pose" in options:
+            T_start = np.asarray(options["start_pose"], dtype=np.float64)
+            if T_start.shape != (4, 4):
+                raise ValueError(f"options['start_pose'] must be a 4x4 pose, got shape {T_start.shape}")
+        for _ in range(3):  # a start pose far from the nominal one may need a few IK rounds
+            result = self.controller.solve(q_start, T_start)
+            q_start = result.q_arm
+            if not result.unreachable:
+                break
         self.data.qpos[self.ids.arm_qpos] = q_start
         self.data.qpos[self.ids.finger_qpos] = START_GRIPPER_WIDTH / 2
         self._q_cmd = q_start.copy()

@@ -1,0 +1,1 @@
+"""Datasets: the LeRobotDataset schema, expert collection, mirroring, UMI zarr import/export."""
