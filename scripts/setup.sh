@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Idempotent set-up, sourced by scripts/main.sh and scripts/test.sh:
-#   - Debian's Mesa EGL libraries for headless MuJoCo rendering (installed when missing and root),
+#   - Debian's Mesa EGL (headless MuJoCo rendering) and FFmpeg libraries (installed when missing and root),
 #   - a Python 3.12 (on PATH, or pyenv's installed 3.12),
 #   - .venv with this project installed (editable, with the dev extras); re-installed only when
 #     pyproject.toml changed since the last install.
@@ -8,14 +8,21 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
-egl_present() { ldconfig -p 2>/dev/null | grep -q "libEGL_mesa.so" && ldconfig -p | grep -q "libgbm.so"; }
-if ! egl_present; then
+# Mesa EGL for headless MuJoCo rendering; FFmpeg's libraries for torchcodec, LeRobot's fast video
+# decoder (without them LeRobot falls back to PyAV with a long warning).
+system_libs_present() {
+  ldconfig -p 2>/dev/null | grep -q "libEGL_mesa.so" && ldconfig -p | grep -q "libgbm.so" \
+    && ldconfig -p | grep -q "libavutil.so"
+}
+if ! system_libs_present; then
   if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
-    echo "[setup] installing Mesa EGL packages (headless rendering)"
+    echo "[setup] installing Debian packages: Mesa EGL (headless rendering), FFmpeg (video decoding)"
     apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+      libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg >/dev/null
   else
-    echo "[setup] WARNING: Mesa EGL libraries missing and not root: install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1" >&2
+    echo "[setup] WARNING: missing system libraries and not root:" \
+      "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg" >&2
   fi
 fi
 

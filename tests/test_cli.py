@@ -15,8 +15,9 @@ BIN = Path(sys.executable).parent
 def test_demo_writes_video_sheet_and_table(tmp_path):
     out = tmp_path / "demo"
     assert main(["demo", "--out-dir", str(out), "--settings", "grid_id,identical_2"]) == 0
-    rows = list(csv.DictReader(open(out / "outcomes.csv")))
-    assert [(r["setting"], r["outcome"]) for r in rows] == [("grid_id", "pick"), ("identical_2", "pick")]
+    rows = list(csv.DictReader((out / "outcomes.csv").read_text().splitlines()))
+    outcomes = [(r["setting"], r["outcome"]) for r in rows]
+    assert outcomes == [("grid_id", "pick"), ("identical_2", "pick")]
     assert "| grid_id | 1 | 0 | 0 | 0 |" in (out / "outcomes.md").read_text()
     video = cv2.VideoCapture(str(out / "grid_id_seed0.mp4"))
     n_frames = int(video.get(cv2.CAP_PROP_FRAME_COUNT))
@@ -34,5 +35,7 @@ def test_unknown_setting_is_refused_with_the_valid_list():
 
 
 def test_non_positive_episode_count_is_refused():
-    result = subprocess.run([BIN / "lerobot_bboxpick", "demo", "--episodes", "0"], capture_output=True, text=True)
+    result = subprocess.run(
+        [BIN / "lerobot_bboxpick", "demo", "--episodes", "0"], capture_output=True, text=True
+    )
     assert result.returncode == 2 and "--episodes" in result.stderr and ">= 1" in result.stderr

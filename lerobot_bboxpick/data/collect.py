@@ -1,0 +1,265 @@
+"""``bboxpick-collect``: scripted-expert demonstrations into a LeRobotDataset v3.
+
+    bboxpick-collect --repo_id=local/lego_pick_expert --root=outputs/datasets/expert \
+        --settings=grid_id --episodes=50 --seed_start=0 --workers=2
+
+How it stays safe to interrupt:
+* Work is split into shards of a few seeds. A worker records a shard as its own small
+  LeRobotDataset in ``<root>.collect/shard_<first seed>.partial``, finalizes it, writes the list of
+  seeds it attempted (kept or not) to ``seeds.json``, and only then renames it to ``shard_<first seed>``.
+  A crash mid-episode leaves a ``.partial`` folder that the next run deletes and redoes.
+* ``--resume=true`` reads the finished shards' ``seeds.json`` and attempts only the seeds not yet
+  attempted, so no episode is recorded twice.
+* The dataset at ``root`` is LeRobot's own aggregation of the finished shards, built in a temporary
+  folder and swapped in whole: it is never half-written.
+Only episodes the expert completes with outcome "pick" are kept unless ``--keep_failed=true`` (then
+every attempt is kept, labelled by its ``episode.outcome`` column, for offline RL).
+"""
+
+import json
+import logging
+import multiprocessing as mp
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import draccus
+import numpy as np
+from tqdm import tqdm
+
+from lerobot_bboxpick.data.features import (
+    EPISODE_OUTCOME,
+    FPS,
+    ROBOT_TYPE,
+    dataset_features,
+    make_frame,
+    outcome_code,
+)
+from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
+
+SHARD_SIZE = 5
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class CollectConfig:
+    """Options of ``bboxpick-collect``."""
+
+    repo_id: str = "local/lego_pick_expert"
+    root: Path = Path("outputs/datasets/lego_pick_expert")
+    # Comma-separated settings; episode seeds cycle through them (seed % len picks the setting).
+    settings: str = "grid_id"
+    # Episodes to end up with in the dataset (kept ones).
+    episodes: int = 50
+    seed_start: int = 0
+    workers: int = 1
+    keep_failed: bool = False
+    resume: bool = False
+    # Episodes per shard: the most work an interruption can lose.
+    shard_size: int = SHARD_SIZE
+    push_to_hub: bool = False
+
+    def __post_init__(self) -> None:
+        self.root = Path(self.root)
+        if not self.setting_list:
+            raise ValueError(f"settings={self.settings!r} is empty; valid settings: {', '.join(SETTINGS)}")
+        for name, minimum in (("episodes", 1), ("workers", 1), ("shard_size", 1), ("seed_start", 0)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < minimum:
+                raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+
+    @property
+    def setting_list(self) -> tuple[str, ...]:
+        """The settings named by ``settings``, validated."""
+        return tuple(check_setting(s.strip()) for s in str(self.settings).split(",") if s.strip())
+
+    @property
+    def work_dir(self) -> Path:
+        """Where the shards live (beside ``root``)."""
+        return self.root.with_name(self.root.name + ".collect")
+
+    def setting_of(self, seed: int) -> str:
+        """The setting an episode seed is recorded in."""
+        return self.setting_list[seed % len(self.setting_list)]
+
+
+@dataclass(frozen=True)
+class ShardTask:
+    """One worker job: record ``seeds`` into ``path``."""
+
+    path: Path
+    seeds: tuple[int, ...]
+    settings: tuple[str, ...]
+    repo_id: str
+    keep_failed: bool
+
+
+def record_episode(env, seed: int, rng_seed: int | None = None) -> tuple[list[dict], str]:
+    """Run the scripted expert on ``env`` for ``seed``; return the frames and the outcome."""
+    from lerobot_bboxpick.expert import ScriptedExpert
+
+    obs, info = env.reset(seed=seed)
+    expert = ScriptedExpert(np.random.default_rng(seed if rng_seed is None else rng_seed))
+    expert.reset(env)
+    frames = []
+    while not expert.done:
+        action = expert.act()
+        next_obs, reward, terminated, truncated, next_info = env.step(action)
+        frames.append(
+            make_frame(
+                obs["pixels"]["wrist"],
+                obs["agent_pos"],
+                obs["bbox"],
+                action,
+                info["task"],
+                reward=reward,
+                done=False,
+                success=next_info["is_success"],
+                seed=seed,
+                setting=info["setting"],
+                target=info["target"],
+            )
+        )
+        obs, info = next_obs, next_info
+        if terminated or truncated:
+            break
+    frames[-1]["next.done"][:] = True
+    for f in frames:  # the outcome is known once the episode is over
+        f[EPISODE_OUTCOME][:] = outcome_code(info["outcome"])
+    return frames, info["outcome"]
+
+
+def record_shard(task: ShardTask) -> list[dict]:
+    """Worker: record a shard; returns one record per attempted seed."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    import lerobot_bboxpick  # noqa: F401  (MUJOCO_GL before mujoco, in spawned workers too)
+    from lerobot_bboxpick.sim.env import LegoPickEnv
+
+    partial = task.path.with_name(task.path.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    dataset = None
+    envs: dict[str, LegoPickEnv] = {}
+    records = []
+    for seed, setting in zip(task.seeds, task.settings, strict=True):
+        if setting not in envs:
+            envs[setting] = LegoPickEnv(setting=setting, terminate_on_lift=False)
+        frames, outcome = record_episode(envs[setting], seed)
+        kept = task.keep_failed or outcome == "pick"
+        if kept:
+            if dataset is None:
+                dataset = LeRobotDataset.create(
+                    repo_id=task.repo_id,
+                    fps=FPS,
+                    features=dataset_features(),
+                    root=partial,
+                    robot_type=ROBOT_TYPE,
+                    use_videos=True,
+                )
+            for frame in frames:
+                dataset.add_frame(frame)
+            dataset.save_episode()
+        records.append(
+            {"seed": seed, "setting": setting, "outcome": outcome, "kept": kept, "frames": len(frames)}
+        )
+    for env in envs.values():
+        env.close()
+    if dataset is not None:
+        dataset.finalize()
+    partial.mkdir(parents=True, exist_ok=True)
+    (partial / "seeds.json").write_text(json.dumps(records, indent=1))
+    partial.rename(task.path)  # the shard exists only once it is complete
+    return records
+
+
+def finished_shards(work_dir: Path) -> list[Path]:
+    """Completed shard folders, in seed order (unfinished ``.partial`` ones are not listed)."""
+    if not work_dir.exists():
+        return []
+    shards = [p for p in work_dir.iterdir() if p.is_dir() and not p.name.endswith(".partial")]
+    return sorted(shards, key=lambda p: int(p.name.split("_")[1]))
+
+
+def attempted(work_dir: Path) -> list[dict]:
+    """Records of every seed attempted by finished shards."""
+    return [r for shard in finished_shards(work_dir) for r in json.loads((shard / "seeds.json").read_text())]
+
+
+def aggregate(cfg: CollectConfig) -> int:
+    """Rebuild ``root`` from the finished shards with LeRobot's aggregation; returns the episode count."""
+    from lerobot.datasets.aggregate import aggregate_datasets
+
+    shards = [s for s in finished_shards(cfg.work_dir) if (s / "meta" / "info.json").exists()]
+    if not shards:
+        raise RuntimeError(f"no episode was kept in {cfg.work_dir}; nothing to aggregate")
+    tmp = cfg.root.with_name(cfg.root.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    aggregate_datasets(
+        repo_ids=[cfg.repo_id] * len(shards), roots=shards, aggr_repo_id=cfg.repo_id, aggr_root=tmp
+    )
+    old = cfg.root.with_name(cfg.root.name + ".old")
+    shutil.rmtree(old, ignore_errors=True)
+    if cfg.root.exists():
+        cfg.root.rename(old)
+    tmp.rename(cfg.root)
+    shutil.rmtree(old, ignore_errors=True)
+    info = json.loads((cfg.root / "meta" / "info.json").read_text())
+    return int(info["total_episodes"])
+
+
+def collect(cfg: CollectConfig) -> dict:
+    """Collect until ``cfg.episodes`` episodes are kept; returns a summary."""
+    if cfg.root.exists() and not cfg.resume:
+        raise FileExistsError(
+            f"root={cfg.root} already exists; pass --resume=true to continue that collection "
+            "or choose another --root"
+        )
+    if cfg.work_dir.exists() and not cfg.resume:
+        raise FileExistsError(
+            f"{cfg.work_dir} holds shards of an interrupted collection; pass --resume=true to finish it"
+        )
+    cfg.work_dir.mkdir(parents=True, exist_ok=True)
+    for stale in cfg.work_dir.glob("*.partial"):  # an interrupted shard: redo it
+        shutil.rmtree(stale)
+    records = attempted(cfg.work_dir)
+    kept = sum(r["kept"] for r in records)
+    next_seed = max([cfg.seed_start - 1] + [r["seed"] for r in records]) + 1
+    ctx = mp.get_context("spawn")  # fresh processes: each opens its own EGL context
+    progress = tqdm(total=cfg.episodes, initial=min(kept, cfg.episodes), desc="episodes kept", unit="ep")
+    with ctx.Pool(cfg.workers) as pool:
+        while kept < cfg.episodes:
+            seeds = list(range(next_seed, next_seed + cfg.episodes - kept))
+            next_seed += len(seeds)
+            tasks = [
+                ShardTask(
+                    path=cfg.work_dir / f"shard_{chunk[0]:08d}",
+                    seeds=tuple(chunk),
+                    settings=tuple(cfg.setting_of(s) for s in chunk),
+                    repo_id=cfg.repo_id,
+                    keep_failed=cfg.keep_failed,
+                )
+                for chunk in (seeds[i : i + cfg.shard_size] for i in range(0, len(seeds), cfg.shard_size))
+            ]
+            for shard_records in pool.imap_unordered(record_shard, tasks):
+                records.extend(shard_records)
+                n = sum(r["kept"] for r in shard_records)
+                kept += n
+                progress.update(n)
+                progress.set_postfix(attempted=len(records))
+    progress.close()
+    total = aggregate(cfg)
+    outcomes = {o: sum(r["outcome"] == o for r in records) for o in ("pick", "wrong", "contact", "empty")}
+    summary = {"root": str(cfg.root), "episodes": total, "attempted": len(records), "outcomes": outcomes}
+    if cfg.push_to_hub:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+        LeRobotDataset(cfg.repo_id, root=cfg.root).push_to_hub()
+    return summary
+
+
+@draccus.wrap()
+def main(cfg: CollectConfig) -> None:
+    """Entry point of ``bboxpick-collect``."""
+    logging.basicConfig(level=logging.INFO)
+    summary = collect(cfg)
+    print(json.dumps(summary, indent=1))
