@@ -95,7 +95,10 @@ class ShardTask:
 
 
 def record_episode(env, seed: int, rng_seed: int | None = None) -> tuple[list[dict], str]:
-    """Run the scripted expert on ``env`` for ``seed``; return the frames and the outcome."""
+    """Run the scripted expert on ``env`` for ``seed``; return the frames and the outcome.
+
+    ``rng_seed`` seeds the expert's own variation (speed, approach offset); default: ``seed``.
+    """
     from lerobot_bboxpick.expert import ScriptedExpert
 
     obs, info = env.reset(seed=seed)
