@@ -1,6 +1,7 @@
 """lerobot_bboxpick: target-specific picking for LeRobot.
 
-Importing the package registers its components with LeRobot: the ``lego_pick`` env config.
+Importing the package registers its components with LeRobot: the ``lego_pick`` env config and the
+``bbox_diffusion`` policy config.
 """
 
 import os
@@ -10,6 +11,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from lerobot_bboxpick.env_config import LegoPickEnvConfig  # noqa: E402
+from lerobot_bboxpick.policies.bbox_diffusion import BboxDiffusionConfig  # noqa: E402
 
-__all__ = ["LegoPickEnvConfig"]
+__all__ = ["BboxDiffusionConfig", "LegoPickEnvConfig"]
 __version__ = "0.1.0"

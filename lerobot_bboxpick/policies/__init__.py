@@ -1,0 +1,1 @@
+"""Policies provided by lerobot_bboxpick."""

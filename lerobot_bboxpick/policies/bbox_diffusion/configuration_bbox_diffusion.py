@@ -1,0 +1,180 @@
+"""Configuration of the ``bbox_diffusion`` policy (``lerobot-train --policy.type=bbox_diffusion``).
+
+A UMI-style diffusion policy (FACTS.md section 2) whose target bounding box enters as a mask
+channel beside the wrist image (paper section 4.1). Presets pick the vision backbone and sizes:
+
+* ``paper``: CLIP ViT-L/14 at 224 px with pretrained weights, UMI's UNet (256, 512, 1024).
+* ``cpu``: a small backbone at a small input size that trains on a 2-core CPU (figures in the README).
+
+Any field left ``None`` takes the preset's value; set it to override.
+"""
+
+from dataclasses import dataclass, field
+
+from lerobot.configs import NormalizationMode, PreTrainedConfig
+from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
+
+BBOX_MODES = ("mask", "lowdim", "none")
+PRESETS: dict[str, dict] = {
+    "paper": {
+        "backbone": "vit_large_patch14_clip_224.openai",
+        "pretrained_backbone": True,
+        "image_size": 224,
+        "down_dims": (256, 512, 1024),
+        "diffusion_step_embed_dim": 128,
+        "encoder_lr_scale": 0.1,
+        "scheduler_warmup_steps": 2000,
+    },
+    "cpu": {
+        "backbone": "resnet18",
+        "pretrained_backbone": False,
+        "image_size": 96,
+        "down_dims": (64, 128, 256),
+        "diffusion_step_embed_dim": 64,
+        "encoder_lr_scale": 1.0,
+        "scheduler_warmup_steps": 200,
+    },
+}
+
+
+@PreTrainedConfig.register_subclass("bbox_diffusion")
+@dataclass
+class BboxDiffusionConfig(PreTrainedConfig):
+    """Options of the bbox-conditioned diffusion policy."""
+
+    # Observation and action horizons (UMI): 2 observed steps, a 16-step chunk starting at the current
+    # step, of which n_action_steps are executed before predicting again.
+    n_obs_steps: int = 2
+    horizon: int = 16
+    n_action_steps: int = 8
+
+    # How the target bbox enters: "mask" (4th image channel, the paper's method), "lowdim" (the four
+    # numbers join the low-dimensional conditioning, paper Exp. 6), "none" (no target prompt, Exp. 1).
+    bbox_mode: str = "mask"
+    preset: str = "cpu"
+    backbone: str | None = None
+    pretrained_backbone: bool | None = None
+    image_size: int | None = None
+    crop_ratio: float = 0.95
+    # ColorJitter (brightness, contrast, saturation, hue), UMI's values.
+    color_jitter: tuple[float, float, float, float] = (0.3, 0.4, 0.5, 0.08)
+
+    # UNet (LeRobot's DiffusionConditionalUnet1d).
+    down_dims: tuple[int, ...] | None = None
+    kernel_size: int = 5
+    n_groups: int = 8
+    diffusion_step_embed_dim: int | None = None
+    use_film_scale_modulation: bool = True
+    gradient_checkpointing: bool = False
+
+    # Noise schedule (UMI: DDIM, 50 train steps, squaredcos_cap_v2, epsilon, clip_sample).
+    num_train_timesteps: int = 50
+    num_inference_steps: int = 16
+    beta_schedule: str = "squaredcos_cap_v2"
+    beta_start: float = 0.0001
+    beta_end: float = 0.02
+    prediction_type: str = "epsilon"
+    clip_sample: bool = True
+    clip_sample_range: float = 1.0
+    input_perturbation: float = 0.1
+
+    # Fixed scales of the relative-pose representation (see processor_bbox_diffusion.py): positions of
+    # the action chunk relative to the current pose are divided by action_position_scale, positions of
+    # the previous observation by obs_position_scale; gripper widths map [0, max_gripper_width] to [-1, 1].
+    action_position_scale: float = 0.25
+    obs_position_scale: float = 0.02
+    max_gripper_width: float = 0.09
+
+    # Optimiser (UMI): AdamW 3e-4, betas (0.95, 0.999), weight decay 1e-6; encoder lr scaled when pretrained.
+    optimizer_lr: float = 3e-4
+    optimizer_betas: tuple[float, float] = (0.95, 0.999)
+    optimizer_eps: float = 1e-8
+    optimizer_weight_decay: float = 1e-6
+    optimizer_grad_clip_norm: float = 10.0
+    encoder_lr_scale: float | None = None
+    scheduler_name: str = "cosine"
+    scheduler_warmup_steps: int | None = None
+    # EMA of the weights (UMI: power 0.75, max decay 0.9999), updated by ``update()`` after each step.
+    use_ema: bool = True
+    ema_power: float = 0.75
+    ema_max_decay: float = 0.9999
+
+    # Checkpoints stay local unless asked: this machine (and many labs) has no Hub access.
+    push_to_hub: bool = False
+    normalization_mapping: dict[str, NormalizationMode] = field(
+        default_factory=lambda: {
+            # Poses are made relative and scaled by the policy's own steps; images are normalised by
+            # the backbone's mean/std; the bbox is already in [0, 1].
+            "VISUAL": NormalizationMode.IDENTITY,
+            "STATE": NormalizationMode.IDENTITY,
+            "ACTION": NormalizationMode.IDENTITY,
+        }
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.bbox_mode not in BBOX_MODES:
+            raise ValueError(f"bbox_mode={self.bbox_mode!r} is not one of {', '.join(BBOX_MODES)}")
+        if self.preset not in PRESETS:
+            raise ValueError(f"preset={self.preset!r} is not one of {', '.join(PRESETS)}")
+        for key, value in PRESETS[self.preset].items():
+            if getattr(self, key) is None:
+                setattr(self, key, value)
+        self.down_dims = tuple(self.down_dims)
+        if not 1 <= self.n_action_steps <= self.horizon:
+            raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon={self.horizon}]")
+        if self.prediction_type not in ("epsilon", "sample"):
+            raise ValueError(f"prediction_type={self.prediction_type!r} must be 'epsilon' or 'sample'")
+        if not 0.5 <= self.crop_ratio <= 1.0:
+            raise ValueError(f"crop_ratio={self.crop_ratio} must be in [0.5, 1]")
+
+    def get_optimizer_preset(self) -> AdamWConfig:
+        """AdamW with UMI's settings."""
+        return AdamWConfig(
+            lr=self.optimizer_lr,
+            betas=self.optimizer_betas,
+            eps=self.optimizer_eps,
+            weight_decay=self.optimizer_weight_decay,
+            grad_clip_norm=self.optimizer_grad_clip_norm,
+        )
+
+    def get_scheduler_preset(self) -> DiffuserSchedulerConfig:
+        """Cosine schedule with linear warm-up."""
+        return DiffuserSchedulerConfig(name=self.scheduler_name, num_warmup_steps=self.scheduler_warmup_steps)
+
+    def validate_features(self) -> None:
+        """The policy needs the wrist image, the 10-float state, the bbox (unless bbox_mode='none')
+        and a 10-float action."""
+        if not self.image_features:
+            raise ValueError("bbox_diffusion needs an image input feature (observation.images.*)")
+        if self.robot_state_feature is None or self.robot_state_feature.shape != (10,):
+            raise ValueError("bbox_diffusion needs observation.state of shape (10,) (TCP pose10)")
+        if self.bbox_mode != "none" and self.bbox_feature_key not in self.input_features:
+            raise ValueError(f"bbox_mode={self.bbox_mode!r} needs the input feature {self.bbox_feature_key}")
+        if self.action_feature is None or self.action_feature.shape != (10,):
+            raise ValueError("bbox_diffusion needs an action of shape (10,) (TCP pose10)")
+
+    @property
+    def bbox_feature_key(self) -> str:
+        """Name of the bbox observation."""
+        return "observation.bbox"
+
+    @property
+    def image_key(self) -> str:
+        """The (single) wrist camera input."""
+        return next(iter(self.image_features))
+
+    @property
+    def observation_delta_indices(self) -> list[int]:
+        """The previous and the current step."""
+        return list(range(1 - self.n_obs_steps, 1))
+
+    @property
+    def action_delta_indices(self) -> list[int]:
+        """The chunk starts at the current step (UMI), not n_obs_steps - 1 steps in the past."""
+        return list(range(self.horizon))
+
+    @property
+    def reward_delta_indices(self) -> None:
+        """No rewards."""
+        return None

@@ -1,0 +1,227 @@
+"""The ``bbox_diffusion`` policy: UMI's diffusion policy with the target bbox as an image mask channel.
+
+Data flow for one prediction (paper figure 5):
+  wrist images (n_obs x 3 x 224 x 224) + bbox -> mask channel built at full resolution
+  -> paired crop/resize (+ colour jitter on RGB) -> RGB+mask backbone -> one feature per frame
+  observed TCP poses -> relative to the latest one (SE(3)) -> scaled low-dim vector
+  [features, low-dim] of every observed step -> global condition (computed once per chunk)
+  -> 16 DDIM steps of LeRobot's conditional 1-D UNet -> relative action chunk (pose10)
+The preprocessor made the training targets relative; the postprocessor makes predictions absolute.
+"""
+
+from collections import deque
+from copy import deepcopy
+
+import torch
+import torch.nn.functional as F
+from diffusers.schedulers.scheduling_ddim import DDIMScheduler
+from lerobot.policies.diffusion.modeling_diffusion import DiffusionConditionalUnet1d
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.policies.utils import populate_queues
+from lerobot.utils.constants import ACTION, OBS_STATE
+from torch import Tensor, nn
+
+from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.policies.bbox_diffusion.encoder import MaskedImageEncoder, PairedAugment, bbox_to_mask
+from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import (
+    absolute_pose10_torch,
+    relative_pose10_torch,
+)
+
+
+class PoseScaler(nn.Module):
+    """Fixed affine scaling of relative pose10 vectors into roughly [-1, 1] (and back).
+
+    Positions are divided by a scale in metres, rot6d entries are already in [-1, 1] (UMI leaves them
+    unnormalised too), gripper widths map [0, max_width] to [-1, 1]. Fixed rather than fitted to
+    dataset statistics because LeRobot hands the processors statistics of absolute poses only.
+    """
+
+    def __init__(self, position_scale: float, max_width: float) -> None:
+        super().__init__()
+        scale = torch.ones(10)
+        scale[:3] = position_scale
+        scale[9] = max_width / 2
+        offset = torch.zeros(10)
+        offset[9] = max_width / 2
+        self.register_buffer("scale", scale, persistent=False)
+        self.register_buffer("offset", offset, persistent=False)
+
+    def forward(self, pose10: Tensor) -> Tensor:
+        """Scale."""
+        return (pose10 - self.offset) / self.scale
+
+    def inverse(self, scaled: Tensor) -> Tensor:
+        """Unscale."""
+        return scaled * self.scale + self.offset
+
+
+class BboxDiffusionModel(nn.Module):
+    """Observation encoder + conditional UNet + DDIM scheduler."""
+
+    def __init__(self, config: BboxDiffusionConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.encoder = MaskedImageEncoder(
+            config.backbone,
+            pretrained=config.pretrained_backbone,
+            image_size=config.image_size,
+            use_mask=config.bbox_mode == "mask",
+        )
+        self.augment = PairedAugment(crop_ratio=config.crop_ratio, color_jitter=config.color_jitter)
+        lowdim = 10 + (4 if config.bbox_mode == "lowdim" else 0)
+        self.obs_scaler = PoseScaler(config.obs_position_scale, config.max_gripper_width)
+        self.action_scaler = PoseScaler(config.action_position_scale, config.max_gripper_width)
+        cond_dim = config.n_obs_steps * (self.encoder.out_dim + lowdim)
+        self.unet = DiffusionConditionalUnet1d(config, global_cond_dim=cond_dim)
+        self.noise_scheduler = DDIMScheduler(
+            num_train_timesteps=config.num_train_timesteps,
+            beta_start=config.beta_start,
+            beta_end=config.beta_end,
+            beta_schedule=config.beta_schedule,
+            clip_sample=config.clip_sample,
+            clip_sample_range=config.clip_sample_range,
+            set_alpha_to_one=True,
+            steps_offset=0,
+            prediction_type=config.prediction_type,
+        )
+
+    def global_condition(self, images: Tensor, states: Tensor, bboxes: Tensor | None) -> Tensor:
+        """(B, T, 3, H, W) images in [0,1], (B, T, 10) absolute poses, (B, T, 4) bboxes -> (B, cond)."""
+        b, t = states.shape[:2]
+        rel_states = relative_pose10_torch(states, states[:, -1])
+        lowdim = [self.obs_scaler(rel_states)]
+        mask = None
+        if self.config.bbox_mode == "mask":
+            # The mask is drawn at the camera resolution before any crop/resize, so augmentation
+            # moves it with the pixels it marks.
+            mask = bbox_to_mask(bboxes, images.shape[-2], images.shape[-1])
+        elif self.config.bbox_mode == "lowdim":
+            lowdim.append(bboxes * 2 - 1)
+        # One crop window per sample, shared by its observed frames.
+        rgb, mask = self.augment(images, mask, out_size=self.config.image_size)
+        features = self.encoder(rgb, mask).view(b, t, -1)
+        return torch.cat([features, *lowdim], dim=-1).flatten(1)
+
+    def _inputs(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor | None]:
+        images = batch[self.config.image_key]
+        states = batch[OBS_STATE]
+        bboxes = batch.get(self.config.bbox_feature_key)
+        if images.ndim == 4:  # a single step without a time axis
+            images, states = images[:, None], states[:, None]
+            bboxes = None if bboxes is None else bboxes[:, None]
+        return images, states, bboxes
+
+    def compute_loss(self, batch: dict[str, Tensor]) -> Tensor:
+        """Epsilon-prediction loss with UMI's input perturbation; ``batch[ACTION]`` is already relative."""
+        cond = self.global_condition(*self._inputs(batch))
+        trajectory = self.action_scaler(batch[ACTION])
+        noise = torch.randn_like(trajectory)
+        # Input perturbation (UMI): the model sees slightly more noise than it is asked to predict.
+        perturbed = noise + self.config.input_perturbation * torch.randn_like(trajectory)
+        timesteps = torch.randint(
+            0, self.config.num_train_timesteps, (trajectory.shape[0],), device=trajectory.device
+        )
+        noisy = self.noise_scheduler.add_noise(trajectory, perturbed, timesteps)
+        prediction = self.unet(noisy, timesteps, global_cond=cond)
+        target = noise if self.config.prediction_type == "epsilon" else trajectory
+        return F.mse_loss(prediction, target)
+
+    @torch.no_grad()
+    def sample(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
+        """Relative action chunk (B, horizon, 10), unscaled, relative to the latest observed pose."""
+        cond = self.global_condition(*self._inputs(batch))  # once per chunk, not per denoising step
+        sample = torch.randn(
+            (cond.shape[0], self.config.horizon, 10),
+            generator=generator,
+            device=cond.device,
+            dtype=cond.dtype,
+        )
+        self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
+        for t in self.noise_scheduler.timesteps:
+            timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
+            output = self.unet(sample, timestep, global_cond=cond)
+            sample = self.noise_scheduler.step(output, t, sample, generator=generator).prev_sample
+        return self.action_scaler.inverse(sample)
+
+
+class BboxDiffusionPolicy(PreTrainedPolicy):
+    """Bbox-conditioned diffusion policy (LeRobot plugin ``bbox_diffusion``)."""
+
+    config_class = BboxDiffusionConfig
+    name = "bbox_diffusion"
+
+    def __init__(self, config: BboxDiffusionConfig, **kwargs) -> None:
+        super().__init__(config)
+        config.validate_features()
+        self.config = config
+        self.model = BboxDiffusionModel(config)
+        # EMA copy used for inference (UMI); saved with the checkpoint beside the trained weights.
+        self.ema_model = deepcopy(self.model).requires_grad_(False) if config.use_ema else None
+        self._ema_updates = 0
+        self.reset()
+
+    def get_optim_params(self) -> list[dict]:
+        """Two parameter groups: the backbone (lr scaled by encoder_lr_scale) and the rest."""
+        backbone = list(self.model.encoder.backbone_parameters())
+        backbone_ids = {id(p) for p in backbone}
+        rest = [p for p in self.model.parameters() if id(p) not in backbone_ids]
+        return [
+            {"params": backbone, "lr": self.config.optimizer_lr * self.config.encoder_lr_scale},
+            {"params": rest},
+        ]
+
+    @torch.no_grad()
+    def update(self) -> None:
+        """EMA step after each optimiser step: decay = 1 - (1 + step)^-power, capped at ema_max_decay."""
+        if self.ema_model is None:
+            return
+        self._ema_updates += 1
+        decay = min(
+            self.config.ema_max_decay, max(0.0, 1 - (1 + self._ema_updates) ** -self.config.ema_power)
+        )
+        for ema_p, p in zip(self.ema_model.parameters(), self.model.parameters(), strict=True):
+            ema_p.mul_(decay).add_(p.detach(), alpha=1 - decay)
+        for ema_b, b in zip(self.ema_model.buffers(), self.model.buffers(), strict=True):
+            ema_b.copy_(b)
+
+    def _inference_model(self) -> BboxDiffusionModel:
+        return self.ema_model if self.ema_model is not None else self.model
+
+    def reset(self) -> None:
+        """Clear the observation history and the action queue (call at every episode start)."""
+        keys = [OBS_STATE, self.config.image_key]
+        if self.config.bbox_mode != "none":
+            keys.append(self.config.bbox_feature_key)
+        self._queues = {k: deque(maxlen=self.config.n_obs_steps) for k in keys}
+        self._actions: deque[Tensor] = deque()
+
+    def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
+        """Training loss."""
+        loss = self.model.compute_loss(batch)
+        return loss, {"diffusion_loss": loss.item()}
+
+    @torch.no_grad()
+    def predict_action_chunk(
+        self, batch: dict[str, Tensor], generator: torch.Generator | None = None
+    ) -> Tensor:
+        """Relative action chunk (B, horizon, 10) for a batch with (B, n_obs, ...) observations."""
+        model = self._inference_model()
+        model.eval()
+        return model.sample(batch, generator=generator)
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
+        """Next action (B, 10), relative to the pose observed in ``batch`` (the postprocessor makes it
+        absolute). A new chunk is predicted every ``n_action_steps`` calls."""
+        batch = {k: v for k, v in batch.items() if k in self._queues}
+        self._queues = populate_queues(self._queues, batch)
+        current = batch[OBS_STATE]
+        if not self._actions:
+            stacked = {k: torch.stack(list(q), dim=1) for k, q in self._queues.items()}
+            chunk = self.predict_action_chunk(stacked, generator=generator)
+            # Keep the chunk in absolute form: later steps are re-expressed relative to the pose
+            # observed then, which is what the postprocessor will compose them with.
+            absolute = absolute_pose10_torch(chunk[:, : self.config.n_action_steps], current)
+            self._actions.extend(absolute.transpose(0, 1))
+        return relative_pose10_torch(self._actions.popleft()[:, None], current)[:, 0]
