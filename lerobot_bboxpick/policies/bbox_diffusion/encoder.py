@@ -16,7 +16,7 @@ import copy
 
 import timm
 import torch
-import torch.nn.functional as F  # noqa: N812 (PyTorch convention)
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 
