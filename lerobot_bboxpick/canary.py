@@ -67,6 +67,57 @@ def evaluate(
     return records
 
 
+def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: str = "grid_id") -> dict:
+    """Does the bbox steer the policy? Paint a neighbour of the target in the target's colour (two
+    identical bricks), then predict the first chunk with the bbox on one brick and on the other.
+
+    Returns, for each designated brick, the chunk end point's distance (m) to both bricks, averaged
+    over ``samples`` policy seeds.
+    """
+    import torch
+
+    from lerobot_bboxpick.eval.rollout import PolicyRunner
+    from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import absolute_pose10_torch
+    from lerobot_bboxpick.sim.env import LegoPickEnv
+    from lerobot_bboxpick.sim.layouts import GRID_COLS, Layout, make_layout
+
+    runner = PolicyRunner.from_pretrained(policy_path)
+    layout = make_layout(setting, np.random.default_rng(seed))
+    first = layout.target
+    # The horizontal neighbour in the grid (same row): a different brick at 7.5 cm.
+    second = first + 1 if (first % GRID_COLS) < GRID_COLS - 1 else first - 1
+    colors = list(layout.colors)
+    colors[second] = colors[first]
+    twins = Layout(layout.setting, layout.positions, layout.yaws, tuple(colors), first)
+    env = LegoPickEnv(setting=setting)
+    result = {"bricks": [first, second]}
+    for designated in (first, second):
+        ends = []
+        for k in range(samples):
+            obs, info = env.reset(seed=seed, options={"layout": twins, "target": designated})
+            runner.reset()
+            torch.manual_seed(k)
+            from lerobot.envs.utils import preprocess_observation
+
+            from lerobot_bboxpick.eval.rollout import _batched
+
+            batch = preprocess_observation({key: _batched(v) for key, v in obs.items()})
+            batch = runner.preprocessor({**batch, "task": [info["task"]]})
+            stacked = {key: value[:, None].repeat_interleave(runner.policy.config.n_obs_steps, dim=1)
+                       for key, value in batch.items() if key in runner.policy._queues}
+            chunk = runner.policy.predict_action_chunk(stacked)
+            state = torch.as_tensor(obs["agent_pos"])[None]
+            ends.append(absolute_pose10_torch(chunk, state)[0, -1, :3].numpy())
+        end = np.mean(ends, axis=0)
+        result[f"bbox_on_{designated}"] = {
+            "end_point": end.round(4).tolist(),
+            f"distance_to_{first}_m": float(np.linalg.norm(end[:2] - env.brick_pose(first)[:2, 3])),
+            f"distance_to_{second}_m": float(np.linalg.norm(end[:2] - env.brick_pose(second)[:2, 3])),
+        }
+    env.close()
+    return result
+
+
 def main(argv: list[str] | None = None) -> None:
     """``python -m lerobot_bboxpick.canary record|evaluate``."""
     parser = argparse.ArgumentParser(
@@ -84,9 +135,14 @@ def main(argv: list[str] | None = None) -> None:
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--runs", type=int, default=5)
     ev.add_argument("--video-dir", type=Path, default=None)
+    sens = sub.add_parser("sensitivity")
+    sens.add_argument("--policy", type=Path, required=True)
+    sens.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     if args.command == "record":
         print(record(args.root, args.seed, args.episodes))
+    elif args.command == "sensitivity":
+        print(json.dumps(target_sensitivity(args.policy, args.seed), indent=1))
     else:
         records = evaluate(args.policy, args.seed, args.runs, video_dir=args.video_dir)
         print(json.dumps(records, indent=1))

@@ -36,6 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--steps", type=_positive, default=120)
     bench.add_argument("--settings", type=_settings, default=SETTINGS)
     bench.add_argument("--out", type=Path, default=Path("outputs/bench/env.md"))
+    bench.add_argument("--policies", action="store_true", help="also time bbox_diffusion and stock diffusion")
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
     sheet.add_argument("--out", type=Path, default=Path("examples/settings_contact_sheet.png"))
     sheet.add_argument("--seed", type=int, default=0)
@@ -51,6 +52,10 @@ def main(argv: list[str] | None = None) -> int:
         from lerobot_bboxpick.bench import bench_table
 
         table = bench_table(args.settings, steps=args.steps)
+        if args.policies:
+            from lerobot_bboxpick.bench import bench_policies
+
+            table += "\n\n" + bench_policies()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(table + "\n")
         print(table)
