@@ -7,6 +7,7 @@ import pytest
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_bboxpick import geometry
+from lerobot_bboxpick.data.collect import record_episode
 from lerobot_bboxpick.data.features import (
     ACTION,
     BBOX,
@@ -16,11 +17,8 @@ from lerobot_bboxpick.data.features import (
     STATE,
     WRIST_IMAGE,
     dataset_features,
-    make_frame,
-    outcome_code,
 )
 from lerobot_bboxpick.data.mirror import main, mirror_dataset, mirror_frame, mirror_layout, swap_left_right
-from lerobot_bboxpick.expert import ScriptedExpert
 from lerobot_bboxpick.sim.env import LegoPickEnv
 from lerobot_bboxpick.sim.layouts import SETTINGS, Layout, describe_target, make_layout
 from lerobot_bboxpick.sim.scene import brick_silhouette_points
@@ -50,35 +48,9 @@ def rollouts(grid_env) -> list[Rollout]:
     """Expert episodes on grid_id (terminate_on_lift=False), every frame recorded."""
     out = []
     for seed in SEEDS:
-        obs, info = grid_env.reset(seed=seed)
-        expert = ScriptedExpert(np.random.default_rng(seed))
-        expert.reset(grid_env)
-        frames, actions = [], []
-        while not expert.done:
-            action = expert.act()
-            nxt, reward, _, _, next_info = grid_env.step(action)
-            frames.append(
-                make_frame(
-                    obs["pixels"]["wrist"],
-                    obs["agent_pos"],
-                    obs["bbox"],
-                    action,
-                    info["task"],
-                    reward=reward,
-                    success=next_info["is_success"],
-                    seed=seed,
-                    setting="grid_id",
-                    target=info["target"],
-                )  # fmt: skip
-            )
-            actions.append(action)
-            obs, info = nxt, next_info
-        frames[-1]["next.done"][:] = True
-        for f in frames:
-            f[EPISODE_OUTCOME][:] = outcome_code(info["outcome"])
-        out.append(
-            Rollout(seed, grid_env.layout, frames[0]["task"], np.array(actions), frames, info["outcome"])
-        )
+        frames, outcome = record_episode(grid_env, seed)
+        actions = np.array([f["action"] for f in frames], dtype=np.float64)
+        out.append(Rollout(seed, grid_env.layout, frames[0]["task"], actions, frames, outcome))
     return out
 
 

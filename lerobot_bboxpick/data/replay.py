@@ -93,4 +93,4 @@ def dataset_sheet(repo_id: str, root: str | Path, episodes: list[int]) -> np.nda
             image = frame_image(dataset, idx)
             draw_bbox(image, arrays["bboxes"][idx - arrays["from"]])
             tiles.append(label(image, f"ep {e} {name} ({SETTINGS[arrays['setting']]})"))
-    return contact_sheet(tiles, columns=4, scale=2)
+    return contact_sheet(tiles, columns=4, scale=1)

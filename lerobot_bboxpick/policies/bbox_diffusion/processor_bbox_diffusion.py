@@ -46,9 +46,31 @@ def absolute_pose10_torch(rel: torch.Tensor, base: torch.Tensor) -> torch.Tensor
     return torch.cat([abs9, rel[..., 9:]], dim=-1)
 
 
+def _chunked(action: torch.Tensor, fn) -> torch.Tensor:
+    """Apply ``fn`` to a (B, T, 10) chunk; a single (B, 10) action goes through as a chunk of one."""
+    return fn(action) if action.ndim == 3 else fn(action[:, None])[:, 0]
+
+
+@dataclass
+class _PairedPoseStep(ProcessorStep):
+    """A step of the relative/absolute pair; ``pair_id`` links the two (saved in the JSON config)."""
+
+    pair_id: str = ""
+
+    def get_config(self) -> dict[str, Any]:
+        """Serialised with the checkpoint."""
+        return {"pair_id": self.pair_id}
+
+    def transform_features(
+        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
+    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
+        """Shapes are unchanged."""
+        return features
+
+
 @ProcessorStepRegistry.register("bbox_diffusion_relative_pose")
 @dataclass
-class RelativePoseActionStep(ProcessorStep):
+class RelativePoseActionStep(_PairedPoseStep):
     """Action chunk -> relative to the latest observed pose; remembers that pose for the postprocessor."""
 
     pair_id: str = field(default_factory=lambda: uuid.uuid4().hex)
@@ -64,28 +86,14 @@ class RelativePoseActionStep(ProcessorStep):
         if action is None:
             return transition
         new = transition.copy()
-        chunk = action if action.ndim == 3 else action[:, None]
-        rel = relative_pose10_torch(chunk.to(base.dtype), base)
-        new[TransitionKey.ACTION] = rel if action.ndim == 3 else rel[:, 0]
+        new[TransitionKey.ACTION] = _chunked(action.to(base.dtype), lambda c: relative_pose10_torch(c, base))
         return new
-
-    def get_config(self) -> dict[str, Any]:
-        """Serialised with the checkpoint."""
-        return {"pair_id": self.pair_id}
-
-    def transform_features(
-        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
-    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
-        """Shapes are unchanged."""
-        return features
 
 
 @ProcessorStepRegistry.register("bbox_diffusion_absolute_pose")
 @dataclass
-class AbsolutePoseActionStep(ProcessorStep):
+class AbsolutePoseActionStep(_PairedPoseStep):
     """Relative action(s) -> absolute TCP poses, using the pose its paired preprocessor step saw last."""
-
-    pair_id: str = ""
 
     def __call__(self, transition: EnvTransition) -> EnvTransition:
         action = transition.get(TransitionKey.ACTION)
@@ -98,20 +106,9 @@ class AbsolutePoseActionStep(ProcessorStep):
                 "observation (with observation.state) before its postprocessor"
             )
         new = transition.copy()
-        chunk = action if action.ndim == 3 else action[:, None]
-        absolute = absolute_pose10_torch(chunk, base.to(chunk.device, chunk.dtype))
-        new[TransitionKey.ACTION] = absolute if action.ndim == 3 else absolute[:, 0]
+        base = base.to(action.device, action.dtype)
+        new[TransitionKey.ACTION] = _chunked(action, lambda c: absolute_pose10_torch(c, base))
         return new
-
-    def get_config(self) -> dict[str, Any]:
-        """Serialised with the checkpoint."""
-        return {"pair_id": self.pair_id}
-
-    def transform_features(
-        self, features: dict[PipelineFeatureType, dict[str, PolicyFeature]]
-    ) -> dict[PipelineFeatureType, dict[str, PolicyFeature]]:
-        """Shapes are unchanged."""
-        return features
 
 
 def make_bbox_diffusion_pre_post_processors(
