@@ -167,3 +167,36 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
         f"{vit_ms:.0f} ms to encode the 2 observation frames on this CPU."
     )
     return "\n".join(lines)
+
+
+def bench_collect(episodes: int = 6, settings: str = "grid_id") -> str:
+    """Markdown table: expert episodes/min and frames/s written by bboxpick-collect with 1 and 2 workers
+    (same seeds, fresh temporary datasets; includes video encoding and the final aggregation)."""
+    import json
+    import tempfile
+    from pathlib import Path
+
+    from lerobot_bboxpick.data.collect import CollectConfig, collect
+
+    lines = ["| workers | episodes | seconds | episodes/min | frames written/s |", "|---|---|---|---|---|"]
+    for workers in (1, 2):
+        with tempfile.TemporaryDirectory() as tmp:
+            root = Path(tmp) / "ds"
+            t0 = time.perf_counter()
+            collect(
+                CollectConfig(
+                    repo_id="bench/collect",
+                    root=root,
+                    settings=settings,
+                    episodes=episodes,
+                    workers=workers,
+                    shard_size=max(1, episodes // (2 * workers)),
+                )
+            )
+            seconds = time.perf_counter() - t0
+            frames = json.loads((root / "meta" / "info.json").read_text())["total_frames"]
+        lines.append(
+            f"| {workers} | {episodes} | {seconds:.1f} | {60 * episodes / seconds:.1f} | "
+            f"{frames / seconds:.1f} |"
+        )
+    return "\n".join(lines)

@@ -103,8 +103,11 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
 
             batch = preprocess_observation({key: _batched(v) for key, v in obs.items()})
             batch = runner.preprocessor({**batch, "task": [info["task"]]})
-            stacked = {key: value[:, None].repeat_interleave(runner.policy.config.n_obs_steps, dim=1)
-                       for key, value in batch.items() if key in runner.policy._queues}
+            stacked = {
+                key: value[:, None].repeat_interleave(runner.policy.config.n_obs_steps, dim=1)
+                for key, value in batch.items()
+                if key in runner.policy._queues
+            }
             chunk = runner.policy.predict_action_chunk(stacked)
             state = torch.as_tensor(obs["agent_pos"])[None]
             ends.append(absolute_pose10_torch(chunk, state)[0, -1, :3].numpy())

@@ -37,6 +37,9 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--settings", type=_settings, default=SETTINGS)
     bench.add_argument("--out", type=Path, default=Path("outputs/bench/env.md"))
     bench.add_argument("--policies", action="store_true", help="also time bbox_diffusion and stock diffusion")
+    bench.add_argument(
+        "--collect", action="store_true", help="also time bboxpick-collect with 1 and 2 workers"
+    )
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
     sheet.add_argument("--out", type=Path, default=Path("examples/settings_contact_sheet.png"))
     sheet.add_argument("--seed", type=int, default=0)
@@ -56,6 +59,10 @@ def main(argv: list[str] | None = None) -> int:
             from lerobot_bboxpick.bench import bench_policies
 
             table += "\n\n" + bench_policies()
+        if args.collect:
+            from lerobot_bboxpick.bench import bench_collect
+
+            table += "\n\n" + bench_collect()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(table + "\n")
         print(table)
