@@ -22,14 +22,13 @@ REPO_ID = "local/canary"
 
 def record(root: Path, seed: int, episodes: int, setting: str = "grid_id") -> Path:
     """``episodes`` expert demonstrations of the scene of ``seed`` (the expert's own variation differs)."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     from lerobot_bboxpick.data.collect import record_episode
-    from lerobot_bboxpick.data.features import FPS, ROBOT_TYPE, dataset_features
+    from lerobot_bboxpick.data.features import create_dataset
     from lerobot_bboxpick.sim.env import LegoPickEnv
 
     env = LegoPickEnv(setting=setting, terminate_on_lift=False)
-    dataset = LeRobotDataset.create(REPO_ID, FPS, dataset_features(), root=root, robot_type=ROBOT_TYPE)
+    dataset = create_dataset(REPO_ID, root)
     for k in tqdm(range(episodes), desc="canary demos", unit="ep"):
         frames, outcome = record_episode(env, seed, rng_seed=1000 + k)
         if outcome != "pick":
@@ -97,12 +96,7 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
             obs, info = env.reset(seed=seed, options={"layout": twins, "target": designated})
             runner.reset()
             torch.manual_seed(k)
-            from lerobot.envs.utils import preprocess_observation
-
-            from lerobot_bboxpick.eval.rollout import _batched
-
-            batch = preprocess_observation({key: _batched(v) for key, v in obs.items()})
-            batch = runner.preprocessor({**batch, "task": [info["task"]]})
+            batch = runner.observation_batch(obs, info["task"])
             stacked = {
                 key: value[:, None].repeat_interleave(runner.policy.config.n_obs_steps, dim=1)
                 for key, value in batch.items()

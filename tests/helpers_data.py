@@ -8,7 +8,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 import lerobot_bboxpick  # noqa: F401  (sets MUJOCO_GL before MuJoCo loads)
 from lerobot_bboxpick.data.collect import record_episode
-from lerobot_bboxpick.data.features import FPS, ROBOT_TYPE, dataset_features
+from lerobot_bboxpick.data.features import create_dataset
 from lerobot_bboxpick.sim.env import LegoPickEnv
 
 
@@ -25,7 +25,7 @@ def make_expert_dataset(
 ) -> LeRobotDataset:
     """A finalized video LeRobotDataset at ``root`` with one expert episode per seed (fps 20)."""
     env = LegoPickEnv(setting=setting, terminate_on_lift=False)
-    ds = LeRobotDataset.create(repo_id, FPS, dataset_features(), root=root, robot_type=ROBOT_TYPE)
+    ds = create_dataset(repo_id, root)
     try:
         for seed in seeds:
             for frame in record_expert_episode(env, seed):

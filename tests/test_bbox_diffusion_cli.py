@@ -92,9 +92,8 @@ def test_checkpoint_actions_are_made_absolute_from_the_observed_pose(checkpoint)
     """The loaded postprocessor turns the policy's relative action into T_observed @ T_rel: the
     relative/absolute pair is wired after loading (not returning raw relative poses)."""
     import torch
-    from lerobot.envs.utils import preprocess_observation
 
-    from lerobot_bboxpick.eval.rollout import PolicyRunner, _batched
+    from lerobot_bboxpick.eval.rollout import PolicyRunner
     from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import absolute_pose10_torch
     from lerobot_bboxpick.sim.env import LegoPickEnv
 
@@ -103,8 +102,7 @@ def test_checkpoint_actions_are_made_absolute_from_the_observed_pose(checkpoint)
     obs, info = env.reset(seed=3)
     env.close()
     runner.reset()
-    batch = preprocess_observation({k: _batched(v) for k, v in obs.items()})
-    batch = runner.preprocessor({**batch, "task": [info["task"]]})
+    batch = runner.observation_batch(obs, info["task"])
     torch.manual_seed(0)
     relative = runner.policy.select_action(batch)
     absolute = runner.postprocessor(relative)

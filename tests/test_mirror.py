@@ -12,10 +12,9 @@ from lerobot_bboxpick.data.features import (
     ACTION,
     BBOX,
     EPISODE_OUTCOME,
-    FPS,
-    ROBOT_TYPE,
     STATE,
     WRIST_IMAGE,
+    create_dataset,
     dataset_features,
 )
 from lerobot_bboxpick.data.mirror import main, mirror_dataset, mirror_frame, mirror_layout, swap_left_right
@@ -145,14 +144,7 @@ def test_image_flip_matches_mirrored_render():
 @pytest.fixture(scope="module")
 def src_dataset(rollouts, tmp_path_factory) -> LeRobotDataset:
     root = tmp_path_factory.mktemp("mirror") / "src"
-    ds = LeRobotDataset.create(
-        repo_id="test/src",
-        fps=FPS,
-        features=dataset_features(),
-        root=root,
-        robot_type=ROBOT_TYPE,
-        use_videos=True,
-    )
+    ds = create_dataset("test/src", root)
     for r in rollouts:
         for frame in r.frames:
             ds.add_frame(dict(frame))

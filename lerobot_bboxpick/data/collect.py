@@ -29,9 +29,7 @@ from tqdm import tqdm
 
 from lerobot_bboxpick.data.features import (
     EPISODE_OUTCOME,
-    FPS,
-    ROBOT_TYPE,
-    dataset_features,
+    create_dataset,
     make_frame,
     outcome_code,
 )
@@ -134,7 +132,6 @@ def record_episode(env, seed: int, rng_seed: int | None = None) -> tuple[list[di
 
 def record_shard(task: ShardTask) -> list[dict]:
     """Worker: record a shard; returns one record per attempted seed."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     import lerobot_bboxpick  # noqa: F401  (MUJOCO_GL before mujoco, in spawned workers too)
     from lerobot_bboxpick.sim.env import LegoPickEnv
@@ -151,14 +148,7 @@ def record_shard(task: ShardTask) -> list[dict]:
         kept = task.keep_failed or outcome == "pick"
         if kept:
             if dataset is None:
-                dataset = LeRobotDataset.create(
-                    repo_id=task.repo_id,
-                    fps=FPS,
-                    features=dataset_features(),
-                    root=partial,
-                    robot_type=ROBOT_TYPE,
-                    use_videos=True,
-                )
+                dataset = create_dataset(task.repo_id, partial)
             for frame in frames:
                 dataset.add_frame(frame)
             dataset.save_episode()

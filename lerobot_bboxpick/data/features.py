@@ -49,6 +49,15 @@ def dataset_features(image_size: int = 224, use_video: bool = True) -> dict[str,
     }
 
 
+def create_dataset(repo_id: str, root, image_size: int = 224):
+    """A new, empty LeRobotDataset with this schema at ``root`` (video, 20 fps, robot ``ur5e_umi``)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    return LeRobotDataset.create(
+        repo_id, FPS, dataset_features(image_size), root=root, robot_type=ROBOT_TYPE, use_videos=True
+    )
+
+
 def setting_code(setting: str | None) -> int:
     """Integer code of a setting name (-1 for None)."""
     return -1 if setting is None else SETTINGS.index(setting)

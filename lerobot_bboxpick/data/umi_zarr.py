@@ -26,11 +26,9 @@ from tqdm.auto import tqdm
 from lerobot_bboxpick import geometry
 from lerobot_bboxpick.data.features import (
     BBOX,
-    FPS,
-    ROBOT_TYPE,
     STATE,
     WRIST_IMAGE,
-    dataset_features,
+    create_dataset,
     make_frame,
 )
 from lerobot_bboxpick.data.tracking import track_bbox
@@ -257,9 +255,7 @@ def import_umi_zarr(
         state = np.concatenate([geometry.pos_axis_angle_to_pose9(pos, rotvec), width[:, :1]], axis=1)
         state = state.astype(np.float32)
         starts = np.concatenate([[0], ends[:-1]])
-        ds = LeRobotDataset.create(
-            repo_id, FPS, dataset_features(image_size=rgb.shape[1]), root=root, robot_type=ROBOT_TYPE
-        )
+        ds = create_dataset(repo_id, root, image_size=rgb.shape[1])
         try:
             for ep, (s, e) in enumerate(
                 tqdm(list(zip(starts, ends, strict=True)), desc="import", unit="episode")

@@ -46,15 +46,18 @@ class PolicyRunner:
         self.preprocessor.reset()
         self.postprocessor.reset()
 
-    @torch.no_grad()
-    def act(self, observation: dict, task: str) -> np.ndarray:
-        """Absolute 10-float action for one env observation."""
+    def observation_batch(self, observation: dict, task: str) -> dict:
+        """One env observation through LeRobot's ``preprocess_observation`` and the saved preprocessor."""
         from lerobot.envs.utils import preprocess_observation
 
         batch = preprocess_observation({k: _batched(v) for k, v in observation.items()})
         batch["task"] = [task]
-        batch = self.preprocessor(batch)
-        action = self.postprocessor(self.policy.select_action(batch))
+        return self.preprocessor(batch)
+
+    @torch.no_grad()
+    def act(self, observation: dict, task: str) -> np.ndarray:
+        """Absolute 10-float action for one env observation."""
+        action = self.postprocessor(self.policy.select_action(self.observation_batch(observation, task)))
         return action[0].cpu().numpy().astype(np.float64)
 
 
