@@ -7,6 +7,8 @@ rendering the wrist view (physics substeps, IK, fisheye warp, bbox projection, o
 from __future__ import annotations
 
 import time
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -174,7 +176,6 @@ def bench_collect(episodes: int = 6, settings: str = "grid_id") -> str:
     (same seeds, fresh temporary datasets; includes video encoding and the final aggregation)."""
     import json
     import tempfile
-    from pathlib import Path
 
     from lerobot_bboxpick.data.collect import CollectConfig, collect
 
@@ -200,3 +201,60 @@ def bench_collect(episodes: int = 6, settings: str = "grid_id") -> str:
             f"{frames / seconds:.1f} |"
         )
     return "\n".join(lines)
+
+
+def save_random_checkpoint(path: str | Path, **config_overrides: Any) -> Path:
+    """A randomly initialised bbox_diffusion checkpoint (policy + its processors) saved the way
+    ``lerobot-train`` saves ``pretrained_model/``; costs what a trained one costs at inference."""
+    from lerobot.policies.factory import make_pre_post_processors
+
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+    from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+
+    inputs, outputs = _policy_features(224)
+    config = BboxDiffusionConfig(
+        input_features=inputs, output_features=outputs, device="cpu", **config_overrides
+    )
+    path = Path(path)
+    BboxDiffusionPolicy(config).save_pretrained(path)
+    pre, post = make_pre_post_processors(config, dataset_stats=None)
+    pre.save_pretrained(path)
+    post.save_pretrained(path)
+    return path
+
+
+def bench_suite(episodes: int = 2, workers: int = 2, full_suite: int = 6 * 30) -> str:
+    """Suite episodes/min for one CPU-preset policy over all six settings, and the projected minutes of
+    the full 6 x 30 suite. The policy is randomly initialised: it never lifts a brick, so every episode
+    runs to the 300-step limit, the slowest case a trained policy can meet."""
+    import json
+    import tempfile
+
+    from lerobot_bboxpick.eval.suite import SuiteConfig, run_suite
+
+    with tempfile.TemporaryDirectory() as tmp:
+        ckpt = save_random_checkpoint(Path(tmp) / "random" / "pretrained_model")
+        t0 = time.perf_counter()
+        run_suite(
+            SuiteConfig(
+                policies=f"cpu_preset={ckpt}",
+                episodes=episodes,
+                workers=workers,
+                videos=0,
+                out_dir=Path(tmp) / "suite",
+            )
+        )
+        seconds = time.perf_counter() - t0
+        lines = [json.loads(x) for x in (Path(tmp) / "suite" / "episodes.jsonl").read_text().splitlines()]
+    n = len(lines)
+    steps = sum(r["steps"] for r in lines)
+    per_min = 60 * n / seconds
+    return "\n".join(
+        [
+            "| suite (cpu preset, all 6 settings) | workers | episodes | env steps | seconds | episodes/min "
+            f"| projected minutes for {full_suite} episodes |",
+            "|---|---|---|---|---|---|---|",
+            f"| random-init policy (all episodes 300 steps) | {workers} | {n} | {steps} | {seconds:.0f} "
+            f"| {per_min:.1f} | {full_suite / per_min:.1f} |",
+        ]
+    )

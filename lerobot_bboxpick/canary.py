@@ -47,12 +47,12 @@ def evaluate(
     runs: int,
     setting: str = "grid_id",
     video_dir: Path | None = None,
-    bbox_override: np.ndarray | None = None,
+    n_action_steps: int | None = None,
 ) -> list[dict]:
     """Closed-loop runs of a checkpoint on the scene of ``seed``; one record per run."""
     from lerobot_bboxpick.eval.rollout import PolicyRunner, rollout
 
-    runner = PolicyRunner.from_pretrained(policy_path)
+    runner = PolicyRunner.from_pretrained(policy_path, n_action_steps=n_action_steps)
     records = []
     for run in tqdm(range(runs), desc="canary runs", unit="run"):
         result = rollout(
@@ -132,6 +132,7 @@ def main(argv: list[str] | None = None) -> None:
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--runs", type=int, default=5)
     ev.add_argument("--video-dir", type=Path, default=None)
+    ev.add_argument("--n-action-steps", type=int, default=None, help="override the checkpoint's value")
     sens = sub.add_parser("sensitivity")
     sens.add_argument("--policy", type=Path, required=True)
     sens.add_argument("--seed", type=int, default=0)
@@ -141,7 +142,9 @@ def main(argv: list[str] | None = None) -> None:
     elif args.command == "sensitivity":
         print(json.dumps(target_sensitivity(args.policy, args.seed), indent=1))
     else:
-        records = evaluate(args.policy, args.seed, args.runs, video_dir=args.video_dir)
+        records = evaluate(
+            args.policy, args.seed, args.runs, video_dir=args.video_dir, n_action_steps=args.n_action_steps
+        )
         print(json.dumps(records, indent=1))
         print(f"picks: {sum(r['outcome'] == 'pick' for r in records)}/{len(records)}")
 

@@ -1,4 +1,5 @@
-"""The ``lerobot_bboxpick`` command: ``demo`` (the main job), ``bench``, ``sheet`` (settings picture)."""
+"""The ``lerobot_bboxpick`` command: ``run`` (the main job: collect -> train -> suite), ``demo`` (expert
+rollouts), ``bench``, ``sheet`` (settings picture)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``lerobot_bboxpick`` console script."""
     parser = argparse.ArgumentParser(prog="lerobot_bboxpick", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="the main job: collect expert demos, lerobot-train, bboxpick-suite")
+    run.add_argument("--profile", choices=("quick", "full"), default="quick")
+    run.add_argument("--out-dir", type=Path, default=Path("outputs/main"))
+    run.add_argument("--bbox-mode", choices=("mask", "lowdim", "none"), default="mask", help="ablations")
     demo = sub.add_parser("demo", help="scripted-expert rollouts per setting: MP4s, contact sheet, table")
     demo.add_argument("--out-dir", type=Path, default=Path("outputs/demo"))
     demo.add_argument("--episodes", type=_positive, default=1, help="episodes per setting")
@@ -40,12 +45,20 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument(
         "--collect", action="store_true", help="also time bboxpick-collect with 1 and 2 workers"
     )
+    bench.add_argument("--suite", action="store_true", help="also time bboxpick-suite on a CPU-preset policy")
+    bench.add_argument("--all", action="store_true", help="--policies --collect --suite")
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
     sheet.add_argument("--out", type=Path, default=Path("examples/settings_contact_sheet.png"))
     sheet.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
 
-    if args.command == "demo":
+    if args.command == "run":
+        from lerobot_bboxpick.pipeline import run_pipeline
+
+        table = run_pipeline(args.profile, args.out_dir, bbox_mode=args.bbox_mode)
+        print(table.read_text())
+        print(f"report (table, bar chart, per-episode JSONL, videos) in {table.parent.resolve()}")
+    elif args.command == "demo":
         from lerobot_bboxpick.demo import run_demo
 
         table = run_demo(args.out_dir, episodes=args.episodes, seed=args.seed, settings=args.settings)
@@ -55,6 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         from lerobot_bboxpick.bench import bench_table
 
         table = bench_table(args.settings, steps=args.steps)
+        if args.all:
+            args.policies = args.collect = args.suite = True
         if args.policies:
             from lerobot_bboxpick.bench import bench_policies
 
@@ -63,6 +78,10 @@ def main(argv: list[str] | None = None) -> int:
             from lerobot_bboxpick.bench import bench_collect
 
             table += "\n\n" + bench_collect()
+        if args.suite:
+            from lerobot_bboxpick.bench import bench_suite
+
+            table += "\n\n" + bench_suite()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(table + "\n")
         print(table)

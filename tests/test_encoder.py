@@ -176,3 +176,28 @@ def test_color_jitter_matches_torchvision_ops() -> None:
     same = color_jitter(x[:1].expand(6, 3, 16, 16), (0.3, 0.4, 0.5, 0.08))  # per-sample factors
     assert all(not torch.allclose(same[0], same[i]) for i in range(1, 6))
     assert same.min() >= 0 and same.max() <= 1
+
+
+def test_cpu_preset_encoder_keypoints_are_non_disruptive_and_follow_the_mask() -> None:
+    """ResNet-18 stage 2 + GroupNorm + spatial softmax (the cpu preset): 4-channel == 3-channel output at
+    init; the keypoints are image coordinates, so a trained mask channel moves them with the box."""
+    kwargs = dict(
+        pretrained=False, image_size=96, pooling="spatial_softmax", feature_stage=2, group_norm=True
+    )
+    torch.manual_seed(0)
+    enc3 = MaskedImageEncoder("resnet18", use_mask=False, **kwargs).eval()
+    torch.manual_seed(0)
+    enc4 = MaskedImageEncoder("resnet18", use_mask=True, **kwargs).eval()
+    assert enc4.out_dim == 64 and not any(isinstance(m, torch.nn.BatchNorm2d) for m in enc4.modules())
+    rgb = torch.rand(2, 3, 96, 96)
+    mask = bbox_to_mask(torch.tensor([[0.1, 0.1, 0.2, 0.2], [0.7, 0.6, 0.8, 0.7]]), 96, 96)
+    with torch.no_grad():
+        assert torch.allclose(enc4(rgb, mask), enc3(rgb), atol=1e-6)
+        # Make the mask channel dominate: the expected keypoint positions then sit on the box.
+        conv = enc4.backbone.get_submodule("conv1")  # expanded: now 4 input channels
+        conv.weight[:, 3:] = 50.0
+        keypoints = enc4(torch.zeros_like(rgb), mask).view(2, -1, 2).mean(1)  # (x, y) in [-1, 1]
+    centres = torch.tensor([[0.15, 0.15], [0.75, 0.65]]) * 2 - 1
+    assert (keypoints[1] - keypoints[0]).dot(centres[1] - centres[0]) > 0  # they move the way the box does
+    with pytest.raises(ValueError, match="pooling"):
+        MaskedImageEncoder("resnet18", pretrained=False, image_size=96, use_mask=True, pooling="max")

@@ -24,13 +24,18 @@ class PolicyRunner:
     postprocessor: Any
 
     @classmethod
-    def from_pretrained(cls, path: str | Path, device: str = "cpu") -> PolicyRunner:
-        """Load like ``lerobot-eval --policy.path=path``."""
+    def from_pretrained(
+        cls, path: str | Path, device: str = "cpu", n_action_steps: int | None = None
+    ) -> PolicyRunner:
+        """Load like ``lerobot-eval --policy.path=path``; ``n_action_steps`` overrides the steps executed
+        per predicted chunk (like ``--policy.n_action_steps``)."""
         from lerobot.configs import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
         config = PreTrainedConfig.from_pretrained(path)
         config.device = device
+        if n_action_steps is not None:
+            config.n_action_steps = n_action_steps
         policy = get_policy_class(config.type).from_pretrained(path, config=config)
         policy.eval()
         pre, post = make_pre_post_processors(
@@ -59,6 +64,28 @@ class PolicyRunner:
         """Absolute 10-float action for one env observation."""
         action = self.postprocessor(self.policy.select_action(self.observation_batch(observation, task)))
         return action[0].cpu().numpy().astype(np.float64)
+
+
+class ExpertRunner:
+    """The scripted expert behind ``PolicyRunner``'s interface: the suite's upper-bound row.
+
+    Its variation (speed, approach offset) is seeded by the episode seed, so it is deterministic per scene.
+    """
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self.expert: Any = None
+
+    def reset(self) -> None:
+        """Plan a pick of the target from the env's just-reset state."""
+        from lerobot_bboxpick.expert import ScriptedExpert
+
+        self.expert = ScriptedExpert(np.random.default_rng(self.env.episode_seed))
+        self.expert.reset(self.env)
+
+    def act(self, observation: dict, task: str) -> np.ndarray:
+        """The next planned action (the observation is not needed: the expert has privileged state)."""
+        return self.expert.act()
 
 
 def _batched(value: Any) -> Any:

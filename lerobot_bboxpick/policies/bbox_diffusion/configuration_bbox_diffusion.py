@@ -20,17 +20,40 @@ PRESETS: dict[str, dict] = {
         "backbone": "vit_large_patch14_clip_224.openai",
         "pretrained_backbone": True,
         "image_size": 224,
+        "pooling": "default",
+        "feature_stage": 2,
+        "group_norm": False,
+        "prediction_type": "epsilon",
         "down_dims": (256, 512, 1024),
         "diffusion_step_embed_dim": 128,
         "encoder_lr_scale": 0.1,
         "scheduler_warmup_steps": 2000,
     },
-    # vit_tiny at 96 px: as fast as the smallest ResNets here (~65 samples/s encoder fwd+bwd on 2 cores),
-    # keeps UMI's patch-embedding + CLS design and LayerNorm (no BatchNorm vs. EMA/small batches).
+    # ResNet-18 cut after stage 2 (stride 8: a 12x12 map at 96 px) + spatial-softmax keypoints, GroupNorm,
+    # from scratch, x0 prediction: see the README's canary section for why this replaced cpu_vit.
     "cpu": {
+        "backbone": "resnet18",
+        "pretrained_backbone": False,
+        "image_size": 96,
+        "pooling": "spatial_softmax",
+        "feature_stage": 2,
+        "group_norm": True,
+        "prediction_type": "sample",
+        "down_dims": (64, 128, 256),
+        "diffusion_step_embed_dim": 64,
+        "encoder_lr_scale": 1.0,
+        "scheduler_warmup_steps": 200,
+    },
+    # vit_tiny at 96 px (6x6 patches, CLS feature): UMI's design at CPU size; as fast as the smallest
+    # ResNets here (~65 samples/s encoder fwd+bwd on 2 cores) but too coarse to localise a brick.
+    "cpu_vit": {
         "backbone": "vit_tiny_patch16_224",
         "pretrained_backbone": False,
         "image_size": 96,
+        "pooling": "default",
+        "feature_stage": 2,
+        "group_norm": False,
+        "prediction_type": "epsilon",
         "down_dims": (64, 128, 256),
         "diffusion_step_embed_dim": 64,
         "encoder_lr_scale": 1.0,
@@ -57,6 +80,13 @@ class BboxDiffusionConfig(PreTrainedConfig):
     backbone: str | None = None
     pretrained_backbone: bool | None = None
     image_size: int | None = None
+    # "default": timm's pooled feature (CLS token for ViTs, as UMI); "spatial_softmax": a CNN cut after
+    # timm stage ``feature_stage`` whose map becomes ``num_keypoints`` (x, y) keypoints.
+    pooling: str | None = None
+    feature_stage: int | None = None
+    num_keypoints: int = 32
+    # GroupNorm instead of BatchNorm in CNN backbones trained from scratch.
+    group_norm: bool | None = None
     crop_ratio: float = 0.95
     # ColorJitter (brightness, contrast, saturation, hue), UMI's values.
     color_jitter: tuple[float, float, float, float] = (0.3, 0.4, 0.5, 0.08)
@@ -75,7 +105,7 @@ class BboxDiffusionConfig(PreTrainedConfig):
     beta_schedule: str = "squaredcos_cap_v2"
     beta_start: float = 0.0001
     beta_end: float = 0.02
-    prediction_type: str = "epsilon"
+    prediction_type: str | None = None
     clip_sample: bool = True
     clip_sample_range: float = 1.0
     input_perturbation: float = 0.1

@@ -13,6 +13,7 @@ augmentation is what broke the 4-number bbox input in the paper), then ``MaskedI
 from __future__ import annotations
 
 import copy
+import math
 
 import timm
 import torch
@@ -100,9 +101,9 @@ def expand_input_channels(model: nn.Module, extra: int = 1) -> nn.Module:
     return model
 
 
-def _create_timm(backbone: str, pretrained: bool, image_size: int) -> nn.Module:
+def _create_timm(backbone: str, pretrained: bool, image_size: int, **extra) -> nn.Module:
     """``timm.create_model`` with ``num_classes=0``; ``img_size`` is passed when the architecture takes it."""
-    kwargs = {"pretrained": pretrained, "num_classes": 0}
+    kwargs = {"pretrained": pretrained, "num_classes": 0, **extra}
     try:
         return timm.create_model(backbone, img_size=image_size, **kwargs)
     except TypeError as e:  # CNNs have no img_size argument (raised before any weight download)
@@ -111,12 +112,40 @@ def _create_timm(backbone: str, pretrained: bool, image_size: int) -> nn.Module:
         return timm.create_model(backbone, **kwargs)
 
 
+POOLINGS = ("default", "spatial_softmax")
+
+
+def _group_norm(num_channels: int, **kwargs) -> nn.Module:
+    """GroupNorm with 16 groups (or the largest divisor of 16 that divides ``num_channels``)."""
+    return timm.layers.GroupNorm(num_channels, num_groups=math.gcd(16, num_channels), **kwargs)
+
+
+class SpatialSoftmaxHead(nn.Module):
+    """timm CNN feature map of one stage -> LeRobot's ``SpatialSoftmax`` keypoints (x, y per keypoint).
+
+    Global pooling throws away *where* things are; keypoints keep it with sub-cell precision, which is
+    what a from-scratch encoder needs to put the gripper on a brick a few pixels wide (Diffusion
+    Policy's ResNet + spatial-softmax design).
+    """
+
+    def __init__(self, feature_shape: tuple[int, int, int], num_keypoints: int) -> None:
+        super().__init__()
+        from lerobot.policies.diffusion.modeling_diffusion import SpatialSoftmax
+
+        self.pool = SpatialSoftmax(feature_shape, num_kp=num_keypoints)
+
+    def forward(self, features: list[Tensor]) -> Tensor:
+        """(B, C, H, W) map (last of timm's feature list) -> (B, 2 * num_keypoints)."""
+        return self.pool(features[-1]).flatten(1)
+
+
 class MaskedImageEncoder(nn.Module):
     """timm backbone over RGB (+ bbox mask channel) returning one global feature per image.
 
-    The feature is timm's pooled output with ``num_classes=0``: the CLS token for ViTs (as in UMI),
-    global average pooling for CNNs. RGB is normalised with the backbone's own mean/std; the mask is fed
-    unchanged (0/1 or fractional coverage).
+    With ``pooling="default"`` the feature is timm's pooled output with ``num_classes=0``: the CLS token
+    for ViTs (as in UMI), global average pooling for CNNs. With ``pooling="spatial_softmax"`` a CNN is
+    cut after stage ``feature_stage`` and its map becomes keypoint coordinates. RGB is normalised with
+    the backbone's own mean/std; the mask is fed unchanged (0/1 or fractional coverage).
     """
 
     def __init__(
@@ -126,6 +155,10 @@ class MaskedImageEncoder(nn.Module):
         image_size: int,
         use_mask: bool,
         feature_dim: int | None = None,
+        pooling: str = "default",
+        feature_stage: int = 2,
+        num_keypoints: int = 32,
+        group_norm: bool = False,
     ) -> None:
         """Build the encoder.
 
@@ -136,13 +169,26 @@ class MaskedImageEncoder(nn.Module):
             image_size: input side in pixels (given to ViTs as ``img_size``; CNNs take any size).
             use_mask: add the mask input channel (zero-initialised weights).
             feature_dim: if set, a linear projection to this size follows the pooled feature.
+            pooling: "default" (timm's pooled output) or "spatial_softmax" (CNNs only, see
+                ``SpatialSoftmaxHead``).
+            feature_stage: with spatial_softmax, the timm feature stage cut at (2 = stride 8 for ResNets).
+            num_keypoints: with spatial_softmax, keypoints per image (the feature has twice as many numbers).
+            group_norm: replace BatchNorm by GroupNorm(16) (from-scratch CNNs: BatchNorm statistics fight
+                with EMA weights and small batches; Diffusion Policy does the same).
         """
         super().__init__()
         if not timm.is_model(backbone):
             raise ValueError(f"unknown timm model '{backbone}'")
+        if pooling not in POOLINGS:
+            raise ValueError(f"pooling={pooling!r} is not one of {', '.join(POOLINGS)}")
+        extra: dict = {}
+        if pooling == "spatial_softmax":
+            extra = {"features_only": True, "out_indices": (feature_stage,)}
+        if group_norm:
+            extra["norm_layer"] = _group_norm
         if pretrained:
             try:
-                model = _create_timm(backbone, True, image_size)
+                model = _create_timm(backbone, True, image_size, **extra)
             except Exception as e:  # hub/network errors come in many types (OSError, httpx, ...)
                 raise RuntimeError(
                     f"could not load pretrained weights for timm backbone '{backbone}' ({type(e).__name__}: "
@@ -151,7 +197,7 @@ class MaskedImageEncoder(nn.Module):
                     "fast instead of retrying)."
                 ) from e
         else:
-            model = _create_timm(backbone, False, image_size)
+            model = _create_timm(backbone, False, image_size, **extra)
         cfg = timm.data.resolve_model_data_config(model)
         self.register_buffer("mean", torch.tensor(cfg["mean"], dtype=torch.float32).view(1, 3, 1, 1), False)
         self.register_buffer("std", torch.tensor(cfg["std"], dtype=torch.float32).view(1, 3, 1, 1), False)
@@ -161,8 +207,14 @@ class MaskedImageEncoder(nn.Module):
         was_training = self.backbone.training
         with torch.no_grad():  # the pooled width is not always num_features (e.g. MobileNetV3 head)
             dummy = torch.zeros(1, 4 if use_mask else 3, image_size, image_size)
-            width = self.backbone.eval()(dummy).shape[-1]
+            out = self.backbone.eval()(dummy)
         self.backbone.train(was_training)
+        if pooling == "spatial_softmax":
+            self.head: nn.Module = SpatialSoftmaxHead(tuple(out[-1].shape[1:]), num_keypoints)
+            width = 2 * num_keypoints
+        else:
+            self.head = nn.Identity()
+            width = out.shape[-1]
         self.proj = nn.Linear(width, feature_dim) if feature_dim is not None else nn.Identity()
         self._out_dim = feature_dim if feature_dim is not None else width
 
@@ -180,7 +232,7 @@ class MaskedImageEncoder(nn.Module):
 
         The mask-channel weights live inside the backbone's first conv tensor, so they get the backbone lr.
         """
-        return self.backbone_parameters(), list(self.proj.parameters())
+        return self.backbone_parameters(), [*self.head.parameters(), *self.proj.parameters()]
 
     def forward(self, rgb: Tensor, mask: Tensor | None = None) -> Tensor:
         """Encode images.
@@ -198,7 +250,7 @@ class MaskedImageEncoder(nn.Module):
             if mask is None:
                 raise ValueError("this encoder was built with use_mask=True: pass the bbox mask")
             x = torch.cat([x, mask.reshape(-1, 1, h, w).to(x.dtype)], dim=1)
-        return self.proj(self.backbone(x)).reshape(*lead, -1)
+        return self.proj(self.head(self.backbone(x))).reshape(*lead, -1)
 
 
 def _gray(x: Tensor) -> Tensor:

@@ -67,6 +67,10 @@ class BboxDiffusionModel(nn.Module):
             pretrained=config.pretrained_backbone,
             image_size=config.image_size,
             use_mask=config.bbox_mode == "mask",
+            pooling=config.pooling,
+            feature_stage=config.feature_stage,
+            num_keypoints=config.num_keypoints,
+            group_norm=config.group_norm,
         )
         self.augment = PairedAugment(crop_ratio=config.crop_ratio, color_jitter=config.color_jitter)
         lowdim = 10 + (4 if config.bbox_mode == "lowdim" else 0)

@@ -1,0 +1,347 @@
+"""``bboxpick-suite``: matched-scene evaluation of policies (paper section 5.2, table 3).
+
+    bboxpick-suite --policies=expert,outputs/train/checkpoints/last/pretrained_model \
+        --settings=grid_id,identical_4 --episodes=30 --workers=2 --out_dir=outputs/suite
+
+Every policy meets the same scenes: episode ``k`` of a setting resets the env with seed
+``seed_start + k`` (held-out seeds >= 10000 by default; collection uses seeds from 0), and the policy's
+own noise is seeded from the same number, so re-running a suite reproduces its scenes and, for a
+deterministic policy, its outcomes. Episodes run in worker processes (each loads a policy once and
+keeps one env per setting); results stream into ``episodes.jsonl`` as they finish, so an interrupted
+suite resumes where it stopped. Written into ``out_dir``:
+
+* ``episodes.jsonl``: one line per episode (policy, setting, seed, scene, target, outcome, steps, distance)
+* ``table.md`` / ``table.csv``: Pick / Wrong / Contact / Empty per policy and setting, Wilson 95% intervals
+* ``outcomes.png``: grouped bars of the same, with the intervals as error bars
+* ``videos/<policy>/<setting>_seed<seed>.mp4``: the first ``videos`` episodes per setting, bbox drawn
+"""
+
+import csv
+import hashlib
+import json
+import logging
+import math
+import multiprocessing as mp
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import draccus
+import numpy as np
+from tqdm import tqdm
+
+from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
+from lerobot_bboxpick.sim.outcome import OUTCOMES
+
+EXPERT = "expert"
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class SuiteConfig:
+    """Options of ``bboxpick-suite``."""
+
+    # Comma-separated policies: "expert" (the scripted upper bound) or checkpoint folders
+    # (``.../pretrained_model``); "name=path" sets the row label.
+    policies: str = EXPERT
+    settings: str = ",".join(SETTINGS)
+    episodes: int = 30
+    seed_start: int = 10000
+    workers: int = 2
+    # Rollout videos kept per policy and setting (the first seeds).
+    videos: int = 2
+    max_steps: int = 300
+    # Executed steps per predicted chunk; None keeps each checkpoint's own setting.
+    n_action_steps: int | None = None
+    out_dir: Path = Path("outputs/suite")
+    # Keep episodes already in out_dir/episodes.jsonl (same policy label, setting and seed).
+    resume: bool = True
+
+    def __post_init__(self) -> None:
+        self.out_dir = Path(self.out_dir)
+        for name, minimum in (("episodes", 1), ("workers", 1), ("max_steps", 1), ("videos", 0)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < minimum:
+                raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+        if not self.setting_list:
+            raise ValueError(f"settings={self.settings!r} is empty; valid settings: {', '.join(SETTINGS)}")
+        labels = [label for label, _ in self.policy_list]
+        if not labels:
+            raise ValueError("policies is empty; give 'expert' and/or checkpoint folders")
+        if len(set(labels)) != len(labels):
+            raise ValueError(f"policies have duplicate labels {labels}; name them with label=path")
+        for label, path in self.policy_list:
+            if path != EXPERT and not (Path(path) / "config.json").is_file():
+                raise ValueError(
+                    f"policies: {label}={path} is neither 'expert' nor a checkpoint folder with config.json"
+                )
+
+    @property
+    def setting_list(self) -> tuple[str, ...]:
+        """The settings named by ``settings``, validated."""
+        return tuple(check_setting(s.strip()) for s in str(self.settings).split(",") if s.strip())
+
+    @property
+    def policy_list(self) -> list[tuple[str, str]]:
+        """(label, path or 'expert') for each entry of ``policies``."""
+        out = []
+        for entry in (e.strip() for e in str(self.policies).split(",") if e.strip()):
+            label, _, path = entry.rpartition("=") if "=" in entry else ("", "", entry)
+            out.append((label or policy_label(path), path))
+        return out
+
+
+def policy_label(path: str) -> str:
+    """A short row label: ``.../<run>/checkpoints/<step>/pretrained_model`` -> ``<run>@<step>``."""
+    if path == EXPERT:
+        return EXPERT
+    parts = Path(path).resolve().parts
+    if "checkpoints" in parts:
+        i = parts.index("checkpoints")
+        return f"{parts[i - 1]}@{parts[i + 1]}"
+    return Path(path).name
+
+
+def scene_fingerprint(layout: Any) -> str:
+    """A short hash of a scene (brick positions, yaws, colours, target): equal scenes, equal hash."""
+    payload = json.dumps(
+        [np.round(layout.positions, 5).tolist(), np.round(layout.yaws, 5).tolist(), list(layout.colors)]
+        + [int(layout.target)]
+    )
+    return hashlib.sha1(payload.encode()).hexdigest()[:12]
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (95% for z = 1.96)."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = successes / n
+    denom = 1 + z**2 / n
+    centre = (p + z**2 / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z**2 / (4 * n**2)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+# ---------------------------------------------------------------- worker side
+_CACHE: dict[str, Any] = {}
+
+
+def _runner(path: str, n_action_steps: int | None, env: Any) -> Any:
+    from lerobot_bboxpick.eval.rollout import ExpertRunner, PolicyRunner
+
+    if path == EXPERT:
+        return ExpertRunner(env)
+    key = f"policy:{path}"
+    if key not in _CACHE:
+        for old in [k for k in _CACHE if k.startswith("policy:")]:
+            del _CACHE[old]  # one checkpoint in memory per worker at a time
+        _CACHE[key] = PolicyRunner.from_pretrained(path, n_action_steps=n_action_steps)
+    return _CACHE[key]
+
+
+def _env(setting: str, max_steps: int) -> Any:
+    from lerobot_bboxpick.sim.env import LegoPickEnv
+
+    envs = _CACHE.setdefault("envs", {})
+    if (setting, max_steps) not in envs:  # one env per setting per worker, reused across episodes
+        envs[(setting, max_steps)] = LegoPickEnv(setting=setting, episode_length=max_steps)
+    return envs[(setting, max_steps)]
+
+
+def run_episode(task: dict) -> dict:
+    """One suite episode (runs in a worker): ``task`` holds label, path, setting, seed and options."""
+    import torch
+
+    from lerobot_bboxpick.eval.rollout import rollout
+
+    torch.set_num_threads(task.get("threads", 1))
+    env = _env(task["setting"], task["max_steps"])
+    runner = _runner(task["path"], task.get("n_action_steps"), env)
+    video = Path(task["video"]) if task.get("video") else None
+    seed = task["seed"]
+    t0 = time.perf_counter()
+    result = rollout(runner, setting=task["setting"], seed=seed, policy_seed=seed, video_path=video, env=env)
+    return {
+        "policy": task["label"],
+        "path": task["path"],
+        "scene": scene_fingerprint(env.layout),
+        **result,
+        "seconds": round(time.perf_counter() - t0, 2),  # wall time in the worker (video writing included)
+    }
+
+
+# ---------------------------------------------------------------- parent side
+def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]]) -> list[dict]:
+    threads = max(1, (mp.cpu_count() or 1) // cfg.workers)
+    tasks = []
+    for label, path in cfg.policy_list:
+        for setting in cfg.setting_list:
+            for k in range(cfg.episodes):
+                seed = cfg.seed_start + k
+                if (label, setting, seed) in done:
+                    continue
+                video = cfg.out_dir / "videos" / label / f"{setting}_seed{seed}.mp4"
+                tasks.append(
+                    {
+                        "label": label,
+                        "path": path,
+                        "setting": setting,
+                        "seed": seed,
+                        "max_steps": cfg.max_steps,
+                        "n_action_steps": cfg.n_action_steps,
+                        "video": str(video) if k < cfg.videos else None,
+                        "threads": threads,
+                    }
+                )
+    return tasks
+
+
+def read_episodes(path: Path) -> list[dict]:
+    """The records of an ``episodes.jsonl`` (a torn last line from a kill is ignored)."""
+    if not path.exists():
+        return []
+    records = []
+    for line in path.read_text().splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            log.warning("ignoring a torn line in %s", path)
+    return records
+
+
+def run_suite(cfg: SuiteConfig) -> Path:
+    """Run (or resume) the suite; write table, chart and JSONL into ``cfg.out_dir``; return table.md."""
+    cfg.out_dir.mkdir(parents=True, exist_ok=True)
+    jsonl = cfg.out_dir / "episodes.jsonl"
+    wanted = {
+        (label, s, cfg.seed_start + k)
+        for label, _ in cfg.policy_list
+        for s in cfg.setting_list
+        for k in range(cfg.episodes)
+    }
+    previous = read_episodes(jsonl) if cfg.resume else []
+    kept = [r for r in previous if (r.get("policy"), r.get("setting"), r.get("seed")) in wanted]
+    done = {(r["policy"], r["setting"], r["seed"]) for r in kept}
+    if kept:
+        log.info("resuming: %d of %d episodes already in %s", len(kept), len(wanted), jsonl)
+    # Rewrite the file with only the episodes of this suite, then append as episodes finish.
+    jsonl.write_text("".join(json.dumps(r) + "\n" for r in kept))
+    tasks = _tasks(cfg, done)
+    records = list(kept)
+    with open(jsonl, "a") as sink, tqdm(total=len(wanted), initial=len(kept), desc="suite", unit="ep") as bar:
+
+        def record(result: dict) -> None:
+            records.append(result)
+            sink.write(json.dumps(result) + "\n")
+            sink.flush()
+            picks = sum(r["outcome"] == "pick" for r in records)
+            bar.set_postfix_str(f"pick {picks}/{len(records)}")
+            bar.update()
+
+        if cfg.workers == 1:
+            for task in tasks:
+                record(run_episode(task))
+        else:
+            # Spawned workers: a fresh GL context and torch per process, nothing inherited.
+            with mp.get_context("spawn").Pool(cfg.workers, maxtasksperchild=None) as pool:
+                for result in pool.imap_unordered(run_episode, tasks, chunksize=1):
+                    record(result)
+    return write_report(records, cfg.out_dir, [label for label, _ in cfg.policy_list], cfg.setting_list)
+
+
+def summarize(records: list[dict], policies: list[str], settings: tuple[str, ...]) -> list[dict]:
+    """One row per (policy, setting): counts, rates and Wilson 95% intervals of each outcome."""
+    rows = []
+    for policy in policies:
+        for setting in settings:
+            group = [r for r in records if r["policy"] == policy and r["setting"] == setting]
+            n = len(group)
+            row: dict[str, Any] = {"policy": policy, "setting": setting, "episodes": n}
+            for outcome in OUTCOMES:
+                k = sum(r["outcome"] == outcome for r in group)
+                low, high = wilson_interval(k, n)
+                row[outcome] = k
+                row[f"{outcome}_rate"] = round(k / n, 4) if n else 0.0
+                row[f"{outcome}_ci_low"] = round(low, 4)
+                row[f"{outcome}_ci_high"] = round(high, 4)
+            distances = [r["final_distance_m"] for r in group]
+            row["mean_final_distance_m"] = round(float(np.mean(distances)), 4) if n else None
+            rows.append(row)
+    return rows
+
+
+def markdown_table(rows: list[dict]) -> str:
+    """Paper-style table: one line per policy and setting, percentages with Wilson 95% intervals."""
+    head = "| policy | setting | n | " + " | ".join(o.capitalize() for o in OUTCOMES) + " |"
+    lines = [head, "|---|---|---|" + "---|" * len(OUTCOMES)]
+    for row in rows:
+        cells = [
+            f"{100 * row[f'{o}_rate']:.0f}% [{100 * row[f'{o}_ci_low']:.0f}-{100 * row[f'{o}_ci_high']:.0f}]"
+            for o in OUTCOMES
+        ]
+        lead = f"| {row['policy']} | {row['setting']} | {row['episodes']} | "
+        lines.append(lead + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def bar_chart(rows: list[dict], path: Path) -> Path:
+    """Grouped bars: one panel per outcome, settings on the x axis, one bar per policy, Wilson error bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    settings = list(dict.fromkeys(r["setting"] for r in rows))
+    fig, axes = plt.subplots(1, len(OUTCOMES), figsize=(4 * len(OUTCOMES), 3.6), sharey=True)
+    width = 0.8 / len(policies)
+    x = np.arange(len(settings))
+    for ax, outcome in zip(axes, OUTCOMES, strict=True):
+        for i, policy in enumerate(policies):
+            sel = [next(r for r in rows if r["policy"] == policy and r["setting"] == s) for s in settings]
+            rate = np.array([100 * r[f"{outcome}_rate"] for r in sel])
+            err = np.array(
+                [
+                    [rate[j] - 100 * r[f"{outcome}_ci_low"], 100 * r[f"{outcome}_ci_high"] - rate[j]]
+                    for j, r in enumerate(sel)
+                ]
+            ).T
+            ax.bar(x + (i - (len(policies) - 1) / 2) * width, rate, width, yerr=err, capsize=2, label=policy)
+        ax.set_title(outcome.capitalize())
+        ax.set_xticks(x, settings, rotation=35, ha="right", fontsize=8)
+        ax.set_ylim(0, 105)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("% of episodes (Wilson 95% CI)")
+    axes[-1].legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def write_report(records: list[dict], out_dir: Path, policies: list[str], settings: tuple[str, ...]) -> Path:
+    """table.md, table.csv and outcomes.png from the episode records; returns table.md."""
+    rows = summarize(records, policies, settings)
+    with open(out_dir / "table.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    bar_chart(rows, out_dir / "outcomes.png")
+    seeds = sorted({r["seed"] for r in records})
+    header = (
+        f"Outcomes per policy and setting over the same scenes (seeds {seeds[0]}-{seeds[-1]}); "
+        "brackets: Wilson 95% interval.\n\n"
+    )
+    path = out_dir / "table.md"
+    path.write_text(header + markdown_table(rows) + "\n")
+    return path
+
+
+@draccus.wrap()
+def main(cfg: SuiteConfig) -> None:
+    """Entry point of ``bboxpick-suite``."""
+    logging.basicConfig(level=logging.INFO)
+    table = run_suite(cfg)
+    print(table.read_text())
+    print(f"report (table.md, table.csv, outcomes.png, episodes.jsonl, videos/) in {cfg.out_dir.resolve()}")

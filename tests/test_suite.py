@@ -1,0 +1,146 @@
+"""bboxpick-suite: the expert scores as an upper bound, reports are consistent, scenes are matched."""
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from lerobot_bboxpick.eval.suite import (
+    SuiteConfig,
+    markdown_table,
+    read_episodes,
+    run_suite,
+    summarize,
+    wilson_interval,
+)
+from lerobot_bboxpick.sim.layouts import SETTINGS
+from lerobot_bboxpick.sim.outcome import OUTCOMES
+
+
+def _random_checkpoint(path: Path) -> Path:
+    """A tiny randomly initialised bbox_diffusion checkpoint, saved as lerobot-train saves one."""
+    from lerobot_bboxpick.bench import save_random_checkpoint
+
+    return save_random_checkpoint(
+        path,
+        backbone="resnet10t",
+        pooling="default",
+        group_norm=False,
+        image_size=64,
+        down_dims=(32, 64),
+        diffusion_step_embed_dim=32,
+        num_inference_steps=4,
+    )
+
+
+def test_wilson_interval_matches_known_values() -> None:
+    # Reference values of the Wilson score interval (z = 1.96).
+    assert wilson_interval(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
+    assert wilson_interval(5, 10) == pytest.approx((0.2366, 0.7634), abs=1e-4)
+    assert wilson_interval(30, 30) == pytest.approx((0.8865, 1.0), abs=1e-4)
+
+
+def test_expert_suite_picks_writes_consistent_reports_and_resumes(tmp_path: Path) -> None:
+    out = tmp_path / "suite"
+    cfg = SuiteConfig(policies="expert", episodes=2, workers=2, videos=1, out_dir=out)
+    table = run_suite(cfg)
+    records = read_episodes(out / "episodes.jsonl")
+    assert len(records) == 2 * len(SETTINGS)
+    picks = sum(r["outcome"] == "pick" for r in records)
+    assert picks / len(records) >= 0.95, records
+    assert {r["seed"] for r in records} == {10000, 10001}
+    for r in records:
+        fields = {"policy", "setting", "seed", "scene", "target", "outcome", "steps", "final_distance_m"}
+        assert set(r) >= fields
+        if r["outcome"] == "pick":  # lifted in the fingers: the TCP is at the brick
+            assert r["final_distance_m"] < 0.05
+
+    # CSV: one row per setting, counts summing to the episodes, rates equal to counts / n.
+    with open(out / "table.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["setting"] for r in rows] == list(SETTINGS)
+    for row in rows:
+        counts = [int(row[o]) for o in OUTCOMES]
+        assert sum(counts) == int(row["episodes"]) == 2
+        assert float(row["pick_rate"]) == pytest.approx(int(row["pick"]) / 2)
+        assert float(row["pick_ci_low"]) <= float(row["pick_rate"]) <= float(row["pick_ci_high"])
+    text = table.read_text()
+    assert text.count("| expert |") == len(SETTINGS) and "Wilson" in text
+    assert (out / "outcomes.png").stat().st_size > 10_000
+    assert len(list((out / "videos" / "expert").glob("*.mp4"))) == len(SETTINGS)
+
+    # Re-running the same suite reproduces it: a third episode per setting is added, the first two kept.
+    (out / "episodes.jsonl").write_text((out / "episodes.jsonl").read_text() + '{"torn": ')
+    rerun = SuiteConfig(policies="expert", settings="grid_id", episodes=3, workers=1, videos=0, out_dir=out)
+    run_suite(rerun)
+    again = read_episodes(out / "episodes.jsonl")
+    assert sorted(r["seed"] for r in again) == [10000, 10001, 10002]
+    kept = {(r["seed"], r["outcome"], r["steps"], r["scene"]) for r in again if r["seed"] < 10002}
+    first = {(r["seed"], r["outcome"], r["steps"], r["scene"]) for r in records if r["setting"] == "grid_id"}
+    assert kept == first
+
+
+def test_expert_is_deterministic_and_policies_meet_the_same_scenes(tmp_path: Path) -> None:
+    ckpt = _random_checkpoint(tmp_path / "ckpt" / "pretrained_model")
+    cfg = SuiteConfig(
+        policies=f"expert,random={ckpt}",
+        settings="identical_4,pile_id",
+        episodes=2,
+        workers=2,
+        videos=0,
+        max_steps=120,
+        out_dir=tmp_path / "a",
+    )
+    run_suite(cfg)
+    a = read_episodes(tmp_path / "a" / "episodes.jsonl")
+    scenes = {}
+    for r in a:
+        scenes.setdefault((r["setting"], r["seed"]), set()).add((r["scene"], r["target"]))
+    assert len(scenes) == 4 and all(len(v) == 1 for v in scenes.values())  # same scene for both policies
+    assert len({next(iter(v))[0] for v in scenes.values()}) == 4  # and different scenes across seeds
+    # The random policy does not pick; its rows exist with all episodes accounted for.
+    rows = summarize(a, ["expert", "random"], ("identical_4", "pile_id"))
+    assert [r["episodes"] for r in rows] == [2, 2, 2, 2]
+    assert all(r["pick"] == 0 for r in rows if r["policy"] == "random")
+    assert "| random | pile_id | 2 |" in markdown_table(rows)
+
+    # Same suite in a fresh folder: same scenes, same expert outcomes and step counts.
+    cfg_b = SuiteConfig(
+        policies="expert",
+        settings="identical_4,pile_id",
+        episodes=2,
+        workers=1,
+        videos=0,
+        max_steps=120,
+        out_dir=tmp_path / "b",
+    )
+    run_suite(cfg_b)
+    b = read_episodes(tmp_path / "b" / "episodes.jsonl")
+
+    def key(records: list[dict]) -> set:
+        return {
+            (r["setting"], r["seed"], r["scene"], r["outcome"], r["steps"])
+            for r in records
+            if r["policy"] == "expert"
+        }
+
+    assert key(a) == key(b)
+
+
+def test_bad_options_name_the_field(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="settings"):
+        SuiteConfig(settings="grid_idd", out_dir=tmp_path)
+    with pytest.raises(ValueError, match="episodes"):
+        SuiteConfig(episodes=0, out_dir=tmp_path)
+    with pytest.raises(ValueError, match="checkpoint folder"):
+        SuiteConfig(policies=str(tmp_path / "missing"), out_dir=tmp_path)
+    result = subprocess.run(
+        [Path(sys.executable).parent / "bboxpick-suite", "--episodes=0", f"--out_dir={tmp_path}"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode != 0 and "episodes" in result.stderr
+    assert not (tmp_path / "episodes.jsonl").exists()
