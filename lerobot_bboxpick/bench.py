@@ -227,10 +227,9 @@ def bench_suite(episodes: int = 2, workers: int = 2, full_suite: int = 6 * 30) -
     """Suite episodes/min for one CPU-preset policy over all six settings, and the projected minutes of
     the full 6 x 30 suite. The policy is randomly initialised: it never lifts a brick, so every episode
     runs to the 300-step limit, the slowest case a trained policy can meet."""
-    import json
     import tempfile
 
-    from lerobot_bboxpick.eval.suite import SuiteConfig, run_suite
+    from lerobot_bboxpick.eval.suite import SuiteConfig, read_episodes, run_suite
 
     with tempfile.TemporaryDirectory() as tmp:
         ckpt = save_random_checkpoint(Path(tmp) / "random" / "pretrained_model")
@@ -245,7 +244,7 @@ def bench_suite(episodes: int = 2, workers: int = 2, full_suite: int = 6 * 30) -
             )
         )
         seconds = time.perf_counter() - t0
-        lines = [json.loads(x) for x in (Path(tmp) / "suite" / "episodes.jsonl").read_text().splitlines()]
+        lines = read_episodes(Path(tmp) / "suite" / "episodes.jsonl")
     n = len(lines)
     steps = sum(r["steps"] for r in lines)
     per_min = 60 * n / seconds

@@ -124,7 +124,9 @@ def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, flo
 
 
 # ---------------------------------------------------------------- worker side
-_CACHE: dict[str, Any] = {}
+# Per worker process: the loaded checkpoint (one at a time) and one env per setting, reused across episodes.
+_POLICIES: dict[str, Any] = {}
+_ENVS: dict[tuple[str, int], Any] = {}
 
 
 def _runner(path: str, n_action_steps: int | None, env: Any) -> Any:
@@ -132,21 +134,18 @@ def _runner(path: str, n_action_steps: int | None, env: Any) -> Any:
 
     if path == EXPERT:
         return ExpertRunner(env)
-    key = f"policy:{path}"
-    if key not in _CACHE:
-        for old in [k for k in _CACHE if k.startswith("policy:")]:
-            del _CACHE[old]  # one checkpoint in memory per worker at a time
-        _CACHE[key] = PolicyRunner.from_pretrained(path, n_action_steps=n_action_steps)
-    return _CACHE[key]
+    if path not in _POLICIES:
+        _POLICIES.clear()  # one checkpoint in memory per worker at a time
+        _POLICIES[path] = PolicyRunner.from_pretrained(path, n_action_steps=n_action_steps)
+    return _POLICIES[path]
 
 
 def _env(setting: str, max_steps: int) -> Any:
     from lerobot_bboxpick.sim.env import LegoPickEnv
 
-    envs = _CACHE.setdefault("envs", {})
-    if (setting, max_steps) not in envs:  # one env per setting per worker, reused across episodes
-        envs[(setting, max_steps)] = LegoPickEnv(setting=setting, episode_length=max_steps)
-    return envs[(setting, max_steps)]
+    if (setting, max_steps) not in _ENVS:
+        _ENVS[(setting, max_steps)] = LegoPickEnv(setting=setting, episode_length=max_steps)
+    return _ENVS[(setting, max_steps)]
 
 
 def run_episode(task: dict) -> dict:
