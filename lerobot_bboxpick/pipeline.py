@@ -38,6 +38,8 @@ class Profile:
     # Chunk steps executed before predicting again: 12 of 16 picked 5/5 in the canary, 8 picked 0/5 and
     # 16 picked 1/5 (README, "The canary").
     n_action_steps: int = 12
+    # Append the augmented mask's centroid/size to the conditioning (mask mode only; see the config).
+    mask_centroid: bool = False
 
 
 PROFILES = {
@@ -61,6 +63,7 @@ PROFILES = {
         warmup_steps=300,
         suite_episodes=30,
         videos=2,
+        mask_centroid=True,
     ),
 }
 
@@ -90,6 +93,7 @@ def train_command(profile: Profile, dataset_root: Path, repo_id: str, out: Path)
         "--policy.type=bbox_diffusion",
         "--policy.preset=cpu",
         f"--policy.bbox_mode={profile.bbox_mode}",
+        f"--policy.mask_centroid={str(profile.mask_centroid and profile.bbox_mode == 'mask').lower()}",
         "--policy.device=cpu",
         f"--policy.scheduler_warmup_steps={profile.warmup_steps}",
         f"--policy.n_action_steps={profile.n_action_steps}",

@@ -18,6 +18,7 @@ TINY = [  # a policy small enough to train a few steps in seconds on a CPU
     "--policy.down_dims=[32,64]",
     "--policy.diffusion_step_embed_dim=32",
     "--policy.num_inference_steps=4",
+    "--policy.mask_centroid=true",  # the CPU recipe's option, so the CLI path covers it
 ]
 
 
@@ -55,6 +56,15 @@ def checkpoint(dataset, tmp_path_factory):
     path = out / "checkpoints" / "last" / "pretrained_model"
     assert (path / "model.safetensors").exists() and (path / "policy_postprocessor.json").exists()
     return path
+
+
+def test_bad_options_name_the_field_and_the_allowed_values():
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+
+    with pytest.raises(ValueError, match="mask_centroid=true needs bbox_mode='mask'"):
+        BboxDiffusionConfig(bbox_mode="none", mask_centroid=True)
+    with pytest.raises(ValueError, match="bbox_mode='box' is not one of mask, lowdim, none"):
+        BboxDiffusionConfig(bbox_mode="box")
 
 
 def test_train_saves_a_loadable_checkpoint_with_its_processors(checkpoint):

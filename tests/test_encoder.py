@@ -18,6 +18,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     bbox_to_mask,
     color_jitter,
     expand_input_channels,
+    mask_moments,
 )
 
 BACKBONES = [("vit_tiny_patch16_224", {"img_size": 96}), ("resnet10t", {})]  # resnet10t: nested stem conv1.0
@@ -141,6 +142,31 @@ def test_augment_keeps_mask_on_target() -> None:
     assert torch.allclose(out_mask.sum((1, 2, 3))[inside], area[inside], rtol=1e-4)  # exact area resampling
     background = out[:, :, :4, :4]  # jitter differs between samples
     assert not torch.allclose(background[:10], background[10:20])
+
+
+def test_mask_moments_follow_the_crop() -> None:
+    """The centroid of the augmented mask sits on the target's augmented pixels (crop-consistent), where
+    the raw bbox centre is off by the crop shift (what broke the 4-number input in paper Exp. 6)."""
+    torch.manual_seed(0)
+    rgb, boxes = _scene(50)
+    inside = (boxes[:, 0] > 0.06) & (boxes[:, 2] < 0.94) & (boxes[:, 1] > 0.06) & (boxes[:, 3] < 0.94)
+    rgb, boxes = rgb[inside], boxes[inside]
+    out, out_mask = PairedAugment()(rgb, bbox_to_mask(boxes, 224, 224), out_size=96)
+    moments = mask_moments(out_mask)
+    chroma = out.amax(1) - out.amin(1)  # (B, 96, 96): the coloured square, blurred by resampling
+    weight = chroma / chroma.sum((1, 2), keepdim=True)
+    centres = torch.linspace(-1 + 1 / 96, 1 - 1 / 96, 96)
+    seen_x, seen_y = (weight.sum(1) * centres).sum(1), (weight.sum(2) * centres).sum(1)
+    px = 2 / 96  # one output pixel in [-1, 1] units
+    assert (moments[:, 0] - seen_x).abs().max() < 0.5 * px
+    assert (moments[:, 1] - seen_y).abs().max() < 0.5 * px
+    raw_x = boxes[:, 0] + boxes[:, 2] - 1  # the un-augmented bbox centre in [-1, 1]
+    assert (raw_x - seen_x).abs().max() > 2 * px  # the crop moved the target, the raw numbers did not
+    assert (moments[:, 3] == 1).all()
+    area = ((boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])) / 0.95**2
+    assert torch.allclose((moments[:, 2] + 1) / 2, area.sqrt(), rtol=0.02)
+    empty = mask_moments(torch.zeros(2, 1, 96, 96))
+    assert empty.tolist() == [[0.0, 0.0, -1.0, -1.0]] * 2  # "not in view", never a made-up position
 
 
 def test_augment_eval_deterministic_and_frames_share_draws() -> None:

@@ -76,6 +76,11 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # How the target bbox enters: "mask" (4th image channel, the paper's method), "lowdim" (the four
     # numbers join the low-dimensional conditioning, paper Exp. 6), "none" (no target prompt, Exp. 1).
     bbox_mode: str = "mask"
+    # With bbox_mode="mask": also append the *augmented* mask's centroid, size and visibility (4 numbers
+    # per frame) to the low-dim conditioning. Unlike the raw bbox (paper Exp. 6) they are measured after
+    # the random crop, so they stay consistent with the pixels; they hand a from-scratch encoder the
+    # target's image position directly instead of making it find the mask through the CNN.
+    mask_centroid: bool = False
     preset: str = "cpu"
     backbone: str | None = None
     pretrained_backbone: bool | None = None
@@ -158,6 +163,8 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon={self.horizon}]")
         if self.prediction_type not in ("epsilon", "sample"):
             raise ValueError(f"prediction_type={self.prediction_type!r} must be 'epsilon' or 'sample'")
+        if self.mask_centroid and self.bbox_mode != "mask":
+            raise ValueError(f"mask_centroid=true needs bbox_mode='mask', got bbox_mode={self.bbox_mode!r}")
         if not 0.5 <= self.crop_ratio <= 1.0:
             raise ValueError(f"crop_ratio={self.crop_ratio} must be in [0.5, 1]")
 

@@ -54,6 +54,28 @@ def bbox_to_mask(bbox: Tensor, height: int, width: int) -> Tensor:
     return (cy[..., :, None] * cx[..., None, :]).unsqueeze(-3)
 
 
+def mask_moments(mask: Tensor) -> Tensor:
+    """Centroid, size and visibility of (augmented) masks: ``(..., 1, H, W) -> (..., 4)``.
+
+    Returns ``[cx, cy, size, visible]``: the mass-weighted centre in [-1, 1] image coordinates (x right,
+    y down, the convention of LeRobot's ``SpatialSoftmax`` keypoints), ``size = 2 * sqrt(area fraction)
+    - 1`` in [-1, 1], and ``visible`` = 1 if the mask has any mass else -1 (then centre and size are 0
+    and -1: "target not in view", never a made-up position).
+    """
+    h, w = mask.shape[-2:]
+    m = mask[..., 0, :, :].float()
+    mass = m.sum((-2, -1))
+    ys = torch.linspace(-1 + 1 / h, 1 - 1 / h, h, device=m.device)  # pixel centres
+    xs = torch.linspace(-1 + 1 / w, 1 - 1 / w, w, device=m.device)
+    safe = mass.clamp(min=1e-6)
+    cx = (m.sum(-2) * xs).sum(-1) / safe
+    cy = (m.sum(-1) * ys).sum(-1) / safe
+    visible = mass > 1e-6
+    size = 2 * (mass / (h * w)).clamp(0, 1).sqrt() - 1
+    out = torch.stack([cx, cy, size, visible.float() * 2 - 1], dim=-1)
+    return torch.where(visible[..., None], out, torch.tensor([0.0, 0.0, -1.0, -1.0], device=m.device))
+
+
 def _first_rgb_conv(model: nn.Module) -> str:
     """Name of the first 3-input-channel conv: timm's ``pretrained_cfg['first_conv']`` if valid, else
     the first ``nn.Conv2d`` with ``in_channels == 3`` in registration order."""

@@ -22,7 +22,12 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
-from lerobot_bboxpick.policies.bbox_diffusion.encoder import MaskedImageEncoder, PairedAugment, bbox_to_mask
+from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
+    MaskedImageEncoder,
+    PairedAugment,
+    bbox_to_mask,
+    mask_moments,
+)
 from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import (
     absolute_pose10_torch,
     relative_pose10_torch,
@@ -73,7 +78,7 @@ class BboxDiffusionModel(nn.Module):
             group_norm=config.group_norm,
         )
         self.augment = PairedAugment(crop_ratio=config.crop_ratio, color_jitter=config.color_jitter)
-        lowdim = 10 + (4 if config.bbox_mode == "lowdim" else 0)
+        lowdim = 10 + (4 if config.bbox_mode == "lowdim" or config.mask_centroid else 0)
         self.obs_scaler = PoseScaler(config.obs_position_scale, config.max_gripper_width)
         self.action_scaler = PoseScaler(config.action_position_scale, config.max_gripper_width)
         cond_dim = config.n_obs_steps * (self.encoder.out_dim + lowdim)
@@ -105,6 +110,8 @@ class BboxDiffusionModel(nn.Module):
         # One crop window per sample, shared by its observed frames.
         rgb, mask = self.augment(images, mask, out_size=self.config.image_size)
         features = self.encoder(rgb, mask).view(b, t, -1)
+        if self.config.mask_centroid:  # measured after the crop: consistent with the pixels
+            lowdim.append(mask_moments(mask))
         return torch.cat([features, *lowdim], dim=-1).flatten(1)
 
     def _inputs(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor | None]:
