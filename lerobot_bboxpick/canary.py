@@ -71,7 +71,9 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
     identical bricks), then predict the first chunk with the bbox on one brick and on the other.
 
     Returns, for each designated brick, the chunk end point's distance (m) to both bricks, averaged
-    over ``samples`` policy seeds.
+    over ``samples`` policy seeds, and ``shift_toward_new_box_m``: how far the end point moved toward the
+    second brick when the bbox moved to it (the move projected on the first-to-second brick direction;
+    > 0 means the bbox steers the policy).
     """
     import torch
 
@@ -111,6 +113,11 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
             f"distance_to_{first}_m": float(np.linalg.norm(end[:2] - env.brick_pose(first)[:2, 3])),
             f"distance_to_{second}_m": float(np.linalg.norm(end[:2] - env.brick_pose(second)[:2, 3])),
         }
+    ends_xy = [np.array(result[f"bbox_on_{b}"]["end_point"][:2]) for b in (first, second)]
+    direction = env.brick_pose(second)[:2, 3] - env.brick_pose(first)[:2, 3]
+    result["shift_toward_new_box_m"] = float(
+        (ends_xy[1] - ends_xy[0]) @ direction / np.linalg.norm(direction)
+    )
     env.close()
     return result
 
@@ -135,12 +142,20 @@ def main(argv: list[str] | None = None) -> None:
     ev.add_argument("--n-action-steps", type=int, default=None, help="override the checkpoint's value")
     sens = sub.add_parser("sensitivity")
     sens.add_argument("--policy", type=Path, required=True)
-    sens.add_argument("--seed", type=int, default=0)
+    sens.add_argument("--seed", type=int, nargs="+", default=[0], help="one or more scenes")
     args = parser.parse_args(argv)
     if args.command == "record":
         print(record(args.root, args.seed, args.episodes))
     elif args.command == "sensitivity":
-        print(json.dumps(target_sensitivity(args.policy, args.seed), indent=1))
+        shifts = []
+        for seed in args.seed:
+            result = target_sensitivity(args.policy, seed)
+            print(json.dumps({"seed": seed, **result}), flush=True)
+            shifts.append(result["shift_toward_new_box_m"])
+        print(
+            f"end point shift toward the new box: mean {np.mean(shifts) * 1000:.1f} mm, "
+            f"positive in {sum(s > 0 for s in shifts)}/{len(shifts)} scenes"
+        )
     else:
         records = evaluate(
             args.policy, args.seed, args.runs, video_dir=args.video_dir, n_action_steps=args.n_action_steps
