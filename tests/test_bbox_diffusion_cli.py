@@ -67,6 +67,21 @@ def test_bad_options_name_the_field_and_the_allowed_values():
         BboxDiffusionConfig(bbox_mode="box")
 
 
+def test_presets_fill_only_what_the_user_left_unset():
+    """The cpu preset brings the recipe's 12 executed steps and the mask centroid; the ablation modes
+    never get the centroid from a preset, and an explicit value always wins."""
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+
+    cpu = BboxDiffusionConfig()
+    assert (cpu.n_action_steps, cpu.mask_centroid) == (12, True)
+    paper = BboxDiffusionConfig(preset="paper")
+    assert (paper.n_action_steps, paper.mask_centroid) == (8, False)
+    for mode in ("none", "lowdim"):
+        assert BboxDiffusionConfig(bbox_mode=mode).mask_centroid is False
+    explicit = BboxDiffusionConfig(mask_centroid=False, n_action_steps=4)
+    assert (explicit.n_action_steps, explicit.mask_centroid) == (4, False)
+
+
 def test_train_saves_a_loadable_checkpoint_with_its_processors(checkpoint):
     config = json.loads((checkpoint / "config.json").read_text())
     assert config["type"] == "bbox_diffusion" and config["bbox_mode"] == "mask"

@@ -39,3 +39,29 @@ def test_non_positive_episode_count_is_refused():
         [BIN / "lerobot_bboxpick", "demo", "--episodes", "0"], capture_output=True, text=True
     )
     assert result.returncode == 2 and "--episodes" in result.stderr and ">= 1" in result.stderr
+
+
+def test_run_trains_the_recipe_and_the_ablation_without_a_centroid(tmp_path):
+    """The main job's lerobot-train call carries the recipe's options; the no-prompt ablation differs
+    only by its bbox mode (no centroid: it has no mask to measure); a finished checkpoint resumes."""
+    from dataclasses import replace
+
+    from lerobot_bboxpick.pipeline import PROFILES, train_command
+
+    full = PROFILES["full"]
+    args = train_command(full, tmp_path / "data", "local/x", tmp_path / "train")
+    recipe = {"--policy.bbox_mode=mask", "--policy.mask_centroid=true", "--policy.n_action_steps=12"}
+    assert recipe <= set(args)
+    assert "--steps=5000" in args and "--batch_size=32" in args
+    ablation = train_command(replace(full, bbox_mode="none"), tmp_path / "data", "local/x", tmp_path / "t")
+    assert {"--policy.bbox_mode=none", "--policy.mask_centroid=false"} <= set(ablation)
+    assert set(args) - set(ablation) == {
+        "--policy.bbox_mode=mask",
+        "--policy.mask_centroid=true",
+        f"--output_dir={tmp_path / 'train'}",
+    }
+    last = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
+    last.mkdir(parents=True)
+    (last / "train_config.json").write_text("{}")
+    resumed = train_command(full, tmp_path / "data", "local/x", tmp_path / "train")
+    assert resumed[1:] == [f"--config_path={last / 'train_config.json'}", "--resume=true"]
