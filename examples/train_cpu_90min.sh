@@ -5,15 +5,18 @@
 # trains (two torch jobs on 2 cores slow each other down 5-10x, not 2x).
 #
 #   1. bboxpick-collect --repo_id=local/lego_pick_full --root=outputs/main/full/data \
-#        --settings=grid_id,identical_4 --episodes=200 --workers=2 --resume=true       (~13 min)
-#   2. lerobot-train --policy.type=bbox_diffusion --policy.preset=cpu --policy.device=cpu \
-#        --policy.scheduler_warmup_steps=300 --policy.n_action_steps=12 --dataset.repo_id=local/lego_pick_full \
+#        --settings=grid_id,identical_4 --episodes=200 --workers=2 --resume=true       (~9 min)
+#   2. lerobot-train --policy.type=bbox_diffusion --policy.preset=cpu --policy.bbox_mode=mask \
+#        --policy.mask_centroid=true --policy.device=cpu --policy.scheduler_warmup_steps=300 \
+#        --policy.n_action_steps=12 --dataset.repo_id=local/lego_pick_full \
 #        --dataset.root=outputs/main/full/data --output_dir=outputs/main/full/train \
 #        --steps=5000 --batch_size=32 --num_workers=1 --save_freq=1000 --log_freq=50 --wandb.enable=false
+#                                                                                        (~76 min)
 #   3. bboxpick-suite --policies=expert,bbox_diffusion=outputs/main/full/train/checkpoints/last/pretrained_model \
-#        --episodes=30 --workers=2 --out_dir=outputs/main/full/suite
+#        --episodes=30 --workers=2 --out_dir=outputs/main/full/suite                       (~10 min)
 # BBOX_MODE=none trains and evaluates the no-prompt ablation the same way, on the same demos, into
-# outputs/main/full/{train,suite}_none.
+# outputs/main/full/{train,suite}_none (its lerobot-train call has --policy.bbox_mode=none
+# --policy.mask_centroid=false and the output folder as the only differences).
 set -euo pipefail
 source scripts/setup.sh
 lerobot_bboxpick run --profile full --bbox-mode "${BBOX_MODE:-mask}"
