@@ -32,6 +32,12 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--profile", choices=("quick", "full"), default="quick")
     run.add_argument("--out-dir", type=Path, default=Path("outputs/main"))
     run.add_argument("--bbox-mode", choices=("mask", "lowdim", "none"), default="mask", help="ablations")
+    run.add_argument(
+        "--amp",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="train under bf16 autocast (lerobot-train --policy.use_amp); default: the profile's choice",
+    )
     demo = sub.add_parser("demo", help="scripted-expert rollouts per setting: MP4s, contact sheet, table")
     demo.add_argument("--out-dir", type=Path, default=Path("outputs/demo"))
     demo.add_argument("--episodes", type=_positive, default=1, help="episodes per setting")
@@ -55,7 +61,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "run":
         from lerobot_bboxpick.pipeline import run_pipeline
 
-        table = run_pipeline(args.profile, args.out_dir, bbox_mode=args.bbox_mode)
+        overrides = {"bbox_mode": args.bbox_mode}
+        if args.amp is not None:
+            overrides["use_amp"] = args.amp
+        table = run_pipeline(args.profile, args.out_dir, **overrides)
         print(table.read_text())
         print(f"report (table, bar chart, per-episode JSONL, videos) in {table.parent.resolve()}")
     elif args.command == "demo":

@@ -9,6 +9,7 @@ Data flow for one prediction (paper figure 5):
 The preprocessor made the training targets relative; the postprocessor makes predictions absolute.
 """
 
+import warnings
 from collections import deque
 from copy import deepcopy
 
@@ -94,24 +95,32 @@ class BboxDiffusionModel(nn.Module):
             steps_offset=0,
             prediction_type=config.prediction_type,
         )
+        # TorchScript traces of the UNet by (device, dtype, batch), built on first use (see _denoiser).
+        # A plain dict, not a submodule: nothing extra in the state dict.
+        self._traced_unets: dict[tuple, torch.jit.ScriptModule] = {}
 
     def global_condition(self, images: Tensor, states: Tensor, bboxes: Tensor | None) -> Tensor:
         """(B, T, 3, H, W) images in [0,1], (B, T, 10) absolute poses, (B, T, 4) bboxes -> (B, cond)."""
         b, t = states.shape[:2]
-        rel_states = relative_pose10_torch(states, states[:, -1])
-        lowdim = [self.obs_scaler(rel_states)]
-        mask = None
-        if self.config.bbox_mode == "mask":
-            # The mask is drawn at the camera resolution before any crop/resize, so augmentation
-            # moves it with the pixels it marks.
-            mask = bbox_to_mask(bboxes, images.shape[-2], images.shape[-1])
-        elif self.config.bbox_mode == "lowdim":
-            lowdim.append(bboxes * 2 - 1)
-        # One crop window per sample, shared by its observed frames.
-        rgb, mask = self.augment(images, mask, out_size=self.config.image_size)
-        features = self.encoder(rgb, mask).view(b, t, -1)
-        if self.config.mask_centroid:  # measured after the crop: consistent with the pixels
-            lowdim.append(mask_moments(mask))
+        # Under autocast (``--policy.use_amp=true``) only the encoder and the UNet run in reduced
+        # precision: bf16 matmuls would round the millimetre-scale relative poses of 0.5 m absolute ones
+        # and blur the mask resampling, so that part stays float32.
+        with torch.autocast(states.device.type, enabled=False):
+            states = states.float()
+            rel_states = relative_pose10_torch(states, states[:, -1])
+            lowdim = [self.obs_scaler(rel_states)]
+            mask = None
+            if self.config.bbox_mode == "mask":
+                # The mask is drawn at the camera resolution before any crop/resize, so augmentation
+                # moves it with the pixels it marks.
+                mask = bbox_to_mask(bboxes.float(), images.shape[-2], images.shape[-1])
+            elif self.config.bbox_mode == "lowdim":
+                lowdim.append(bboxes.float() * 2 - 1)
+            # One crop window per sample, shared by its observed frames.
+            rgb, mask = self.augment(images.float(), mask, out_size=self.config.image_size)
+            if self.config.mask_centroid:  # measured after the crop: consistent with the pixels
+                lowdim.append(mask_moments(mask))
+        features = self.encoder(rgb, mask).view(b, t, -1).float()
         return torch.cat([features, *lowdim], dim=-1).flatten(1)
 
     def _inputs(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor | None]:
@@ -138,6 +147,24 @@ class BboxDiffusionModel(nn.Module):
         target = noise if self.config.prediction_type == "epsilon" else trajectory
         return F.mse_loss(prediction, target)
 
+    def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> nn.Module:
+        """The UNet to call during sampling: its TorchScript trace in eval mode (``jit_inference``), else
+        the module itself. The trace holds the same parameter tensors, so in-place updates (EMA, loading
+        a state dict) need no re-trace; autocast and training keep the eager module."""
+        if not self.config.jit_inference or self.training or torch.is_autocast_enabled(cond.device.type):
+            return self.unet
+        key = (cond.device, cond.dtype, cond.shape[0])
+        if key not in self._traced_unets:
+            with torch.no_grad(), warnings.catch_warnings():
+                # torch >= 2.9 marks trace deprecated (in favour of torch.compile, whose first call
+                # compiles for tens of seconds in every eval worker); group_norm's batch-size check
+                # becomes a constant, which is why the key holds the batch size.
+                warnings.simplefilter("ignore")
+                self._traced_unets[key] = torch.jit.trace(
+                    self.unet, (sample, timestep, cond), check_trace=False
+                )
+        return self._traced_unets[key]
+
     @torch.no_grad()
     def sample(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
         """Relative action chunk (B, horizon, 10), unscaled, relative to the latest observed pose."""
@@ -151,7 +178,7 @@ class BboxDiffusionModel(nn.Module):
         self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
         for t in self.noise_scheduler.timesteps:
             timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
-            output = self.unet(sample, timestep, global_cond=cond)
+            output = self._denoiser(sample, timestep, cond)(sample, timestep, cond)
             sample = self.noise_scheduler.step(output, t, sample, generator=generator).prev_sample
         return self.action_scaler.inverse(sample)
 

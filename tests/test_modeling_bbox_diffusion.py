@@ -1,0 +1,87 @@
+"""The policy's sampling paths: the TorchScript-traced UNet must give the eager UNet's chunks."""
+
+import torch
+
+from lerobot_bboxpick.bench import _policy_features
+from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+
+
+def _policy(**overrides) -> BboxDiffusionPolicy:
+    torch.manual_seed(0)
+    inputs, outputs = _policy_features(image_size=96)
+    config = BboxDiffusionConfig(device="cpu", input_features=inputs, output_features=outputs, **overrides)
+    return BboxDiffusionPolicy(config).eval()
+
+
+def _batch(b: int) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(1)
+    return {
+        "observation.images.wrist": torch.rand(b, 2, 3, 96, 96, generator=g),
+        "observation.state": torch.rand(b, 2, 10, generator=g),
+        "observation.bbox": torch.tensor([0.3, 0.3, 0.5, 0.6]).expand(b, 2, 4),
+    }
+
+
+def _chunk(policy: BboxDiffusionPolicy, batch: dict) -> torch.Tensor:
+    return policy.predict_action_chunk(batch, generator=torch.Generator().manual_seed(7))
+
+
+def test_traced_unet_gives_the_eager_chunk_and_follows_weight_updates():
+    traced, eager = _policy(), _policy(jit_inference=False)
+    batch = _batch(3)
+    a, b = _chunk(traced, batch), _chunk(eager, batch)
+    assert traced.ema_model._traced_unets, "jit_inference=True did not use a trace"
+    assert not eager.ema_model._traced_unets
+    assert (a - b).abs().max() < 1e-5
+    assert a.abs().max() > 1e-3  # a real chunk, not zeros on both sides
+    # In-place weight changes (what EMA updates and load_state_dict do) reach the existing trace.
+    for policy in (traced, eager):
+        with torch.no_grad():
+            for p in policy.ema_model.unet.parameters():
+                p.mul_(1.5)
+    a2, b2 = _chunk(traced, batch), _chunk(eager, batch)
+    assert (a2 - b2).abs().max() < 1e-5
+    assert (a2 - a).abs().max() > 1e-3  # the update changed the prediction
+    # A new batch size gets its own trace with the same numbers as eager.
+    one = {k: v[:1] for k, v in batch.items()}
+    assert (_chunk(traced, one) - _chunk(eager, one)).abs().max() < 1e-5
+    assert len(traced.ema_model._traced_unets) == 2
+    assert not any("traced" in k for k in traced.state_dict())  # the cache is not part of a checkpoint
+
+
+def test_training_and_autocast_keep_the_eager_unet():
+    policy = _policy()
+    batch = _batch(2)
+    policy.train()
+    loss, _ = policy.forward({**batch, "action": torch.rand(2, 16, 10)})
+    loss.backward()  # training goes through the eager UNet, so gradients reach its weights
+    assert policy.model.unet.final_conv[-1].weight.grad.abs().sum() > 0
+    policy.eval()
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        _chunk(policy, batch)
+    assert not policy.ema_model._traced_unets
+
+
+def test_autocast_keeps_pose_and_mask_conditioning_in_float32():
+    """bf16 autocast (``--policy.use_amp=true``) may round the encoder features, never the poses."""
+    policy = _policy()
+    model = policy.model.eval()  # deterministic centre crop: both calls see the same pixels
+    batch = _batch(2)
+    # Valid poses 0.5 m from the base (identity rotation), the older one 1.3 mm further along x.
+    pose = torch.tensor([0.5, 0.4, 0.3, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.05])
+    batch["observation.state"] = pose.expand(2, 2, 10).clone()
+    batch["observation.state"][:, 0, 0] += 0.0013
+    inputs = model._inputs(batch)
+    ref = model.global_condition(*inputs)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        amp = model.global_condition(*inputs)
+    assert amp.dtype == torch.float32
+    width = model.encoder.out_dim
+    per_step = ref.view(2, 2, -1)
+    lowdim_ref, lowdim_amp = per_step[..., width:], amp.view(2, 2, -1)[..., width:]
+    assert (lowdim_amp - lowdim_ref).abs().max() < 1e-6
+    # The scaled relative x of the older frame: 1.3 mm / obs_position_scale (0.02 m) = 0.065.
+    assert abs(lowdim_ref[0, 0, 0].item() - 0.0013 / model.config.obs_position_scale) < 1e-4
+    feats_ref, feats_amp = per_step[..., :width], amp.view(2, 2, -1)[..., :width]
+    assert (feats_amp - feats_ref).abs().max() < 0.05 * feats_ref.abs().max()
