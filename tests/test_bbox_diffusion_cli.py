@@ -19,6 +19,7 @@ TINY = [  # a policy small enough to train a few steps in seconds on a CPU
     "--policy.diffusion_step_embed_dim=32",
     "--policy.num_inference_steps=4",
     "--policy.mask_centroid=true",  # the CPU recipe's option, so the CLI path covers it
+    "--policy.use_amp=true",  # the recipe trains under bf16 autocast; lerobot-eval then evaluates under it
 ]
 
 

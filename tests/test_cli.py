@@ -60,9 +60,9 @@ def test_run_trains_the_recipe_and_the_ablation_without_a_centroid(tmp_path):
         "--policy.mask_centroid=true",
         f"--output_dir={tmp_path / 'train'}",
     }
-    assert "--policy.use_amp=false" in args
-    amp = train_command(replace(full, use_amp=True), tmp_path / "data", "local/x", tmp_path / "train")
-    assert set(amp) - set(args) == {"--policy.use_amp=true"}
+    assert "--policy.use_amp=true" in args  # the recipe trains under bf16 autocast
+    fp32 = train_command(replace(full, use_amp=False), tmp_path / "data", "local/x", tmp_path / "train")
+    assert set(fp32) - set(args) == {"--policy.use_amp=false"}
     last = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
     last.mkdir(parents=True)
     (last / "train_config.json").write_text("{}")
