@@ -67,4 +67,4 @@ def test_run_trains_the_recipe_and_the_ablation_without_a_centroid(tmp_path):
     last.mkdir(parents=True)
     (last / "train_config.json").write_text("{}")
     resumed = train_command(full, tmp_path / "data", "local/x", tmp_path / "train")
-    assert resumed[1:] == [f"--config_path={last / 'train_config.json'}", "--resume=true"]
+    assert resumed[1:] == [f"--config_path={last / 'train_config.json'}", "--resume=true", "--steps=5000"]
