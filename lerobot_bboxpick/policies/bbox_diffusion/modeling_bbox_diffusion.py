@@ -176,9 +176,11 @@ class BboxDiffusionModel(nn.Module):
             dtype=cond.dtype,
         )
         self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
+        timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
+        unet = self._denoiser(sample, timestep, cond)  # chosen (and traced if new) once per chunk
         for t in self.noise_scheduler.timesteps:
             timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
-            output = self._denoiser(sample, timestep, cond)(sample, timestep, cond)
+            output = unet(sample, timestep, cond)
             sample = self.noise_scheduler.step(output, t, sample, generator=generator).prev_sample
         return self.action_scaler.inverse(sample)
 
