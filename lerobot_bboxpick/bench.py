@@ -66,25 +66,29 @@ def _policy_features(image_size: int = 224) -> tuple[dict, dict]:
 
 
 def _time_policy(
-    policy, batch: dict, obs: dict, train_steps: int = 4, chunks: int = 5
+    policy, batch: dict, obs: dict, train_steps: int = 8, chunks: int = 5
 ) -> tuple[float, float]:
-    """(training samples/s, inference ms per chunk) of a LeRobot policy on random tensors."""
+    """(training samples/s, inference ms per chunk) of a LeRobot policy on random tensors.
+
+    Both figures come from the median step / chunk time: a single slow step (allocator growth, another
+    process waking up) would otherwise move a mean over a few steps by 20%.
+    """
     import torch
 
     params = [p for p in policy.parameters() if p.requires_grad]
     opt = torch.optim.AdamW(params, lr=1e-4)
     policy.train()
-    policy.forward(batch)[0].backward()  # warm-up
-    opt.zero_grad()
-    t0 = time.perf_counter()
-    for _ in range(train_steps):
+    step_times = []
+    for _ in range(train_steps + 1):  # the first step warms up (allocations, AdamW state)
+        t0 = time.perf_counter()
         loss, _ = policy.forward(batch)
         loss.backward()
         opt.step()
         opt.zero_grad()
         if hasattr(policy, "update"):
             policy.update()
-    samples_per_s = train_steps * len(batch["action"]) / (time.perf_counter() - t0)
+        step_times.append(time.perf_counter() - t0)
+    samples_per_s = len(batch["action"]) / float(np.median(step_times[1:]))
     policy.eval()
     times = []
     with torch.no_grad():

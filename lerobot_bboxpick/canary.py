@@ -2,10 +2,14 @@
 
 It proves the chain data -> relative poses -> chunk execution -> absolute actions before anyone
 trains at scale (a peer team's policies stopped 30 cm short of the brick because of such a break).
+By default the episodes alternate between two designated bricks of that one scene (the seed's target
+and its grid neighbour): the first frames of both kinds of episode are the same image, so only the
+bbox tells the policy where to go, and the checkpoint's target sensitivity means something.
 
     python -m lerobot_bboxpick.canary record --root outputs/canary/data --seed 0 --episodes 5
     lerobot-train ... (see examples/canary.sh)
     python -m lerobot_bboxpick.canary evaluate --policy outputs/canary/train/checkpoints/last/pretrained_model
+    python -m lerobot_bboxpick.canary sensitivity --policy <the same checkpoint>
 """
 
 from __future__ import annotations
@@ -20,19 +24,40 @@ from tqdm import tqdm
 REPO_ID = "local/canary"
 
 
-def record(root: Path, seed: int, episodes: int, setting: str = "grid_id") -> Path:
-    """``episodes`` expert demonstrations of the scene of ``seed`` (the expert's own variation differs)."""
+def grid_neighbour(layout) -> int:
+    """The brick beside ``layout.target`` in its grid row (7.5 cm away), to the right unless at the edge."""
+    from lerobot_bboxpick.sim.layouts import GRID_COLS
+
+    first = layout.target
+    return first + 1 if (first % GRID_COLS) < GRID_COLS - 1 else first - 1
+
+
+def canary_targets(seed: int, count: int, setting: str = "grid_id") -> list[int]:
+    """The designated bricks of the canary's scene: the seed's target, then (count=2) its grid neighbour."""
+    from lerobot_bboxpick.sim.layouts import make_layout
+
+    if count not in (1, 2):
+        raise ValueError(f"targets={count} must be 1 (the seed's target) or 2 (it and its grid neighbour)")
+    layout = make_layout(setting, np.random.default_rng(seed))
+    return [layout.target, grid_neighbour(layout)][:count]
+
+
+def record(root: Path, seed: int, episodes: int, setting: str = "grid_id", targets: int = 2) -> Path:
+    """``episodes`` expert demonstrations of the scene of ``seed`` (the expert's own variation differs),
+    designating the ``canary_targets`` in turn."""
 
     from lerobot_bboxpick.data.collect import record_episode
     from lerobot_bboxpick.data.features import create_dataset
     from lerobot_bboxpick.sim.env import LegoPickEnv
 
+    bricks = canary_targets(seed, targets, setting)
     env = LegoPickEnv(setting=setting, terminate_on_lift=False)
     dataset = create_dataset(REPO_ID, root)
     for k in tqdm(range(episodes), desc="canary demos", unit="ep"):
-        frames, outcome = record_episode(env, seed, rng_seed=1000 + k)
+        target = bricks[k % len(bricks)]
+        frames, outcome = record_episode(env, seed, rng_seed=1000 + k, options={"target": target})
         if outcome != "pick":
-            raise RuntimeError(f"expert failed on seed {seed} (variation {k}): {outcome}")
+            raise RuntimeError(f"expert failed on seed {seed}, brick {target} (variation {k}): {outcome}")
         for frame in frames:
             dataset.add_frame(frame)
         dataset.save_episode()
@@ -48,21 +73,26 @@ def evaluate(
     setting: str = "grid_id",
     video_dir: Path | None = None,
     n_action_steps: int | None = None,
+    targets: int = 2,
 ) -> list[dict]:
-    """Closed-loop runs of a checkpoint on the scene of ``seed``; one record per run."""
+    """Closed-loop runs of a checkpoint on the scene of ``seed``, designating the ``canary_targets`` in
+    turn (as ``record`` did); one record per run ("pick" means the designated brick was lifted)."""
     from lerobot_bboxpick.eval.rollout import PolicyRunner, rollout
 
+    bricks = canary_targets(seed, targets, setting)
     runner = PolicyRunner.from_pretrained(policy_path, n_action_steps=n_action_steps)
     records = []
     for run in tqdm(range(runs), desc="canary runs", unit="run"):
+        target = bricks[run % len(bricks)]
         result = rollout(
             runner,
             setting=setting,
             seed=seed,
             policy_seed=run,
-            video_path=None if video_dir is None else video_dir / f"run{run}.mp4",
+            video_path=None if video_dir is None else video_dir / f"run{run}_brick{target}.mp4",
+            options={"target": target},
         )
-        records.append(result)
+        records.append(result)  # its "target" is the designated brick
     return records
 
 
@@ -80,13 +110,11 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
     from lerobot_bboxpick.eval.rollout import PolicyRunner
     from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import absolute_pose10_torch
     from lerobot_bboxpick.sim.env import LegoPickEnv
-    from lerobot_bboxpick.sim.layouts import GRID_COLS, Layout, make_layout
+    from lerobot_bboxpick.sim.layouts import Layout, make_layout
 
     runner = PolicyRunner.from_pretrained(policy_path)
     layout = make_layout(setting, np.random.default_rng(seed))
-    first = layout.target
-    # The horizontal neighbour in the grid (same row): a different brick at 7.5 cm.
-    second = first + 1 if (first % GRID_COLS) < GRID_COLS - 1 else first - 1
+    first, second = layout.target, grid_neighbour(layout)
     colors = list(layout.colors)
     colors[second] = colors[first]
     twins = Layout(layout.setting, layout.positions, layout.yaws, tuple(colors), first)
@@ -134,18 +162,20 @@ def main(argv: list[str] | None = None) -> None:
     rec.add_argument("--root", type=Path, required=True)
     rec.add_argument("--seed", type=int, default=0)
     rec.add_argument("--episodes", type=int, default=5)
+    rec.add_argument("--targets", type=int, default=2, choices=(1, 2), help="designated bricks, in turn")
     ev = sub.add_parser("evaluate")
     ev.add_argument("--policy", type=Path, required=True)
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--runs", type=int, default=5)
     ev.add_argument("--video-dir", type=Path, default=None)
     ev.add_argument("--n-action-steps", type=int, default=None, help="override the checkpoint's value")
+    ev.add_argument("--targets", type=int, default=2, choices=(1, 2), help="designated bricks, in turn")
     sens = sub.add_parser("sensitivity")
     sens.add_argument("--policy", type=Path, required=True)
     sens.add_argument("--seed", type=int, nargs="+", default=[0], help="one or more scenes")
     args = parser.parse_args(argv)
     if args.command == "record":
-        print(record(args.root, args.seed, args.episodes))
+        print(record(args.root, args.seed, args.episodes, targets=args.targets))
     elif args.command == "sensitivity":
         shifts = []
         for seed in args.seed:
@@ -158,7 +188,12 @@ def main(argv: list[str] | None = None) -> None:
         )
     else:
         records = evaluate(
-            args.policy, args.seed, args.runs, video_dir=args.video_dir, n_action_steps=args.n_action_steps
+            args.policy,
+            args.seed,
+            args.runs,
+            video_dir=args.video_dir,
+            n_action_steps=args.n_action_steps,
+            targets=args.targets,
         )
         print(json.dumps(records, indent=1))
         print(f"picks: {sum(r['outcome'] == 'pick' for r in records)}/{len(records)}")

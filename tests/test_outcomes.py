@@ -100,3 +100,27 @@ def test_episode_terminates_once_a_brick_is_lifted():
 
 def test_grasp_height_keeps_fingertips_above_the_table():
     assert 0.0 < GRASP_HEIGHT < 0.0192
+
+
+def test_a_thrown_brick_ends_the_episode_as_sim_unstable(grid_env):
+    """A brick far faster than the gripper can move it means the contact solver blew up: the env ends
+    the episode and flags it, instead of scoring whatever the explosion did. A normal pick stays below
+    the threshold with a wide margin."""
+    from lerobot_bboxpick.sim.outcome import UNSTABLE_BRICK_SPEED
+
+    obs, info = grid_env.reset(seed=3)
+    expert = ScriptedExpert(np.random.default_rng(3))
+    expert.reset(grid_env)
+    while not expert.done:
+        _, _, terminated, _, info = grid_env.step(expert.act())
+    assert info["outcome"] == "pick" and not info["sim_unstable"] and not terminated
+    assert grid_env._tracker.peak_brick_speed < UNSTABLE_BRICK_SPEED / 2
+
+    obs, info = grid_env.reset(seed=3)
+    hold = obs["agent_pos"].copy()
+    other = (grid_env.target + 1) % 12
+    dof = grid_env.ids.brick_dof[other]
+    grid_env.data.qvel[dof : dof + 3] = [0.0, 12.0, 3.0]  # as an exploding contact would throw it
+    _, _, terminated, _, info = grid_env.step(hold)
+    assert info["sim_unstable"] and terminated
+    assert info["outcome"] == "empty"  # nothing tracked after the blow-up

@@ -24,3 +24,28 @@ def test_shift_is_zero_when_the_bbox_cannot_matter(tmp_path, mask_centroid: bool
     # the distances are measured to the two bricks 7.5 cm apart in the grid row
     gap = abs(on_first[f"distance_to_{first}_m"] - on_first[f"distance_to_{second}_m"])
     assert gap <= 0.075 + 1e-6
+
+
+def test_canary_designates_two_neighbouring_bricks_of_one_scene(tmp_path) -> None:
+    """The canary's demos alternate between the seed's target and its grid neighbour, so the same first
+    image needs two different chunks and only the bbox can tell the policy which one."""
+    import numpy as np
+    import pandas as pd
+
+    from lerobot_bboxpick.canary import canary_targets, record
+    from lerobot_bboxpick.data.features import EPISODE_TARGET
+    from lerobot_bboxpick.sim.layouts import make_layout
+
+    first, second = canary_targets(0, 2)
+    layout = make_layout("grid_id", np.random.default_rng(0))
+    assert first == layout.target and second != first
+    gap = np.linalg.norm(layout.positions[first] - layout.positions[second])
+    assert abs(gap - 0.075) < 0.01, f"neighbours {first}, {second} are {gap * 1000:.0f} mm apart"
+    assert canary_targets(0, 1) == [first]
+    with pytest.raises(ValueError, match="targets=3"):
+        canary_targets(0, 3)
+
+    root = record(tmp_path / "canary", seed=0, episodes=3)
+    frames = pd.concat(pd.read_parquet(p) for p in sorted((root / "data").rglob("*.parquet")))
+    per_episode = frames.groupby("episode_index")[EPISODE_TARGET].first().tolist()
+    assert per_episode == [first, second, first]

@@ -92,14 +92,17 @@ class ShardTask:
     keep_failed: bool
 
 
-def record_episode(env, seed: int, rng_seed: int | None = None) -> tuple[list[dict], str]:
+def record_episode(
+    env, seed: int, rng_seed: int | None = None, options: dict | None = None
+) -> tuple[list[dict], str]:
     """Run the scripted expert on ``env`` for ``seed``; return the frames and the outcome.
 
     ``rng_seed`` seeds the expert's own variation (speed, approach offset); default: ``seed``.
+    ``options`` go to ``env.reset`` (e.g. ``{"target": k}`` to designate another brick of the scene).
     """
     from lerobot_bboxpick.expert import ScriptedExpert
 
-    obs, info = env.reset(seed=seed)
+    obs, info = env.reset(seed=seed, options=options)
     expert = ScriptedExpert(np.random.default_rng(seed if rng_seed is None else rng_seed))
     expert.reset(env)
     frames = []

@@ -133,6 +133,7 @@ def rollout(
         "outcome": info["outcome"],
         "steps": steps,
         "final_distance_m": distance,
+        "sim_unstable": bool(info.get("sim_unstable", False)),
     }
     if own_env:
         env.close()

@@ -264,6 +264,8 @@ def summarize(records: list[dict], policies: list[str], settings: tuple[str, ...
                 row[f"{outcome}_rate"] = round(k / n, 4) if n else 0.0
                 row[f"{outcome}_ci_low"] = round(low, 4)
                 row[f"{outcome}_ci_high"] = round(high, 4)
+            # Episodes whose simulation blew up (env info "sim_unstable"): kept in the counts, flagged here.
+            row["sim_unstable"] = sum(bool(r.get("sim_unstable", False)) for r in group)
             distances = [r["final_distance_m"] for r in group]
             row["mean_final_distance_m"] = round(float(np.mean(distances)), 4) if n else None
             rows.append(row)
@@ -332,8 +334,15 @@ def write_report(records: list[dict], out_dir: Path, policies: list[str], settin
         f"Outcomes per policy and setting over the same scenes (seeds {seeds[0]}-{seeds[-1]}); "
         "brackets: Wilson 95% interval.\n\n"
     )
+    unstable = [f"{r['policy']}/{r['setting']}: {r['sim_unstable']}" for r in rows if r["sim_unstable"]]
+    footer = ""
+    if unstable:
+        footer = (
+            "\nEpisodes ended early because the simulation blew up (a brick faster than 5 m/s), "
+            f"counted with the outcome tracked until then: {', '.join(unstable)}.\n"
+        )
     path = out_dir / "table.md"
-    path.write_text(header + markdown_table(rows) + "\n")
+    path.write_text(header + markdown_table(rows) + "\n" + footer)
     return path
 
 

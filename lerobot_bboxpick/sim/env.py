@@ -282,7 +282,9 @@ class LegoPickEnv(gym.Env):
         info = self._info(ik=ik, width_clamped=width_clamped)
         outcome = info["outcome"]
         reward = 1.0 if outcome == "pick" else 0.0
-        terminated = self.options.terminate_on_lift and outcome in ("pick", "wrong")
+        # A blown-up simulation ends the episode: what follows it is not physics (its outcome stays
+        # what was tracked before, and info["sim_unstable"] says so).
+        terminated = (self.options.terminate_on_lift and outcome in ("pick", "wrong")) or info["sim_unstable"]
         truncated = self._steps >= self.options.episode_length
         return obs, reward, terminated, truncated, info
 
@@ -339,6 +341,7 @@ class LegoPickEnv(gym.Env):
             "ik_clamped": bool(ik.clamped) if ik else False,
             "ik_position_error": float(ik.position_error) if ik else 0.0,
             "gripper_width_clamped": width_clamped,
+            "sim_unstable": self._tracker.unstable,
         }
 
 
