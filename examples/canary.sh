@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# The canary (issue 4): 5 expert demos of ONE grid_id scene, designating two neighbouring bricks in turn
-# (so only the bbox tells them apart), train the CPU preset <= 15 min, then 5 closed-loop runs on that
-# scene (same two bricks in turn) and the target-sensitivity check on the same checkpoint.
+# The canary (issue 4): 5 expert demos of ONE grid_id scene, train the CPU preset <= 15 min, then 5
+# closed-loop runs on that scene and the target-sensitivity check on the same checkpoint.
+# TARGETS=2 designates the scene's target and its grid neighbour in turn (same first image, only the
+# bbox tells them apart), in the demos and in the runs.
 # Run from the repository root; sources scripts/setup.sh (creates .venv when missing).
 set -euo pipefail
 source scripts/setup.sh
 SEED=${SEED:-0}
 OUT=${OUT:-outputs/canary}
-TARGETS=${TARGETS:-2}
+TARGETS=${TARGETS:-1}
 STEPS=${STEPS:-1500}  # ~13 min at ~1.9 steps/s (batch 32, bf16 autocast) on 2 cores
 [ -d "$OUT/data" ] || python -m lerobot_bboxpick.canary record --root "$OUT/data" --seed "$SEED" \
   --episodes 5 --targets "$TARGETS"

@@ -2,9 +2,10 @@
 
 It proves the chain data -> relative poses -> chunk execution -> absolute actions before anyone
 trains at scale (a peer team's policies stopped 30 cm short of the brick because of such a break).
-By default the episodes alternate between two designated bricks of that one scene (the seed's target
-and its grid neighbour): the first frames of both kinds of episode are the same image, so only the
-bbox tells the policy where to go, and the checkpoint's target sensitivity means something.
+With ``--targets 2`` the episodes alternate between two designated bricks of that one scene (the seed's
+target and its grid neighbour): the first frames of both kinds of episode are the same image, so only
+the bbox tells the policy where to go, and the checkpoint's target sensitivity means something (a
+one-target checkpoint has no reason to read the bbox at all).
 
     python -m lerobot_bboxpick.canary record --root outputs/canary/data --seed 0 --episodes 5
     lerobot-train ... (see examples/canary.sh)
@@ -42,7 +43,7 @@ def canary_targets(seed: int, count: int, setting: str = "grid_id") -> list[int]
     return [layout.target, grid_neighbour(layout)][:count]
 
 
-def record(root: Path, seed: int, episodes: int, setting: str = "grid_id", targets: int = 2) -> Path:
+def record(root: Path, seed: int, episodes: int, setting: str = "grid_id", targets: int = 1) -> Path:
     """``episodes`` expert demonstrations of the scene of ``seed`` (the expert's own variation differs),
     designating the ``canary_targets`` in turn."""
 
@@ -73,7 +74,7 @@ def evaluate(
     setting: str = "grid_id",
     video_dir: Path | None = None,
     n_action_steps: int | None = None,
-    targets: int = 2,
+    targets: int = 1,
 ) -> list[dict]:
     """Closed-loop runs of a checkpoint on the scene of ``seed``, designating the ``canary_targets`` in
     turn (as ``record`` did); one record per run ("pick" means the designated brick was lifted)."""
@@ -162,14 +163,14 @@ def main(argv: list[str] | None = None) -> None:
     rec.add_argument("--root", type=Path, required=True)
     rec.add_argument("--seed", type=int, default=0)
     rec.add_argument("--episodes", type=int, default=5)
-    rec.add_argument("--targets", type=int, default=2, choices=(1, 2), help="designated bricks, in turn")
+    rec.add_argument("--targets", type=int, default=1, choices=(1, 2), help="designated bricks, in turn")
     ev = sub.add_parser("evaluate")
     ev.add_argument("--policy", type=Path, required=True)
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--runs", type=int, default=5)
     ev.add_argument("--video-dir", type=Path, default=None)
     ev.add_argument("--n-action-steps", type=int, default=None, help="override the checkpoint's value")
-    ev.add_argument("--targets", type=int, default=2, choices=(1, 2), help="designated bricks, in turn")
+    ev.add_argument("--targets", type=int, default=1, choices=(1, 2), help="designated bricks, in turn")
     sens = sub.add_parser("sensitivity")
     sens.add_argument("--policy", type=Path, required=True)
     sens.add_argument("--seed", type=int, nargs="+", default=[0], help="one or more scenes")

@@ -51,7 +51,7 @@ def test_traced_unet_gives_the_eager_chunk_and_follows_weight_updates():
 
 
 def test_training_and_autocast_keep_the_eager_unet():
-    policy = _policy()
+    policy = _policy(autocast_inference=True)
     batch = _batch(2)
     policy.train()
     loss, _ = policy.forward({**batch, "action": torch.rand(2, 16, 10)})
@@ -61,6 +61,22 @@ def test_training_and_autocast_keep_the_eager_unet():
     with torch.autocast("cpu", dtype=torch.bfloat16):
         _chunk(policy, batch)
     assert not policy.ema_model._traced_unets
+
+
+def test_sampling_leaves_an_enclosing_autocast_by_default():
+    """lerobot-eval samples under autocast for use_amp checkpoints; by default the policy samples in
+    float32 through the trace anyway (same chunk as outside autocast), with autocast_inference it does not."""
+    policy, batch = _policy(), _batch(2)
+    plain = _chunk(policy, batch)
+    policy.ema_model._traced_unets.clear()
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        inside = _chunk(policy, batch)
+    assert policy.ema_model._traced_unets, "sampling under autocast did not use the float32 trace"
+    assert inside.dtype == torch.float32 and (inside - plain).abs().max() < 1e-6
+    rounded = _policy(autocast_inference=True)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        bf16 = _chunk(rounded, batch)
+    assert (bf16 - plain).abs().max() > 1e-4  # bf16 sampling really rounds: the switch does something
 
 
 def test_autocast_keeps_pose_and_mask_conditioning_in_float32():

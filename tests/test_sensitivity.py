@@ -27,8 +27,8 @@ def test_shift_is_zero_when_the_bbox_cannot_matter(tmp_path, mask_centroid: bool
 
 
 def test_canary_designates_two_neighbouring_bricks_of_one_scene(tmp_path) -> None:
-    """The canary's demos alternate between the seed's target and its grid neighbour, so the same first
-    image needs two different chunks and only the bbox can tell the policy which one."""
+    """The two-target canary's demos alternate between the seed's target and its grid neighbour, so the
+    same first image needs two different chunks and only the bbox can tell the policy which one."""
     import numpy as np
     import pandas as pd
 
@@ -45,7 +45,7 @@ def test_canary_designates_two_neighbouring_bricks_of_one_scene(tmp_path) -> Non
     with pytest.raises(ValueError, match="targets=3"):
         canary_targets(0, 3)
 
-    root = record(tmp_path / "canary", seed=0, episodes=3)
+    root = record(tmp_path / "canary", seed=0, episodes=3, targets=2)
     frames = pd.concat(pd.read_parquet(p) for p in sorted((root / "data").rglob("*.parquet")))
     per_episode = frames.groupby("episode_index")[EPISODE_TARGET].first().tolist()
     assert per_episode == [first, second, first]

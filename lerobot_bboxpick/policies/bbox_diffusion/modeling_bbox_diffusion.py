@@ -245,10 +245,18 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
     def predict_action_chunk(
         self, batch: dict[str, Tensor], generator: torch.Generator | None = None
     ) -> Tensor:
-        """Relative action chunk (B, horizon, 10) for a batch with (B, n_obs, ...) observations."""
+        """Relative action chunk (B, horizon, 10) for a batch with (B, n_obs, ...) observations.
+
+        Sampling leaves an enclosing autocast (``lerobot-eval`` opens one for checkpoints trained with
+        ``use_amp``) unless ``autocast_inference`` is set: see the config field.
+        """
         model = self._inference_model()
         model.eval()
-        return model.sample(batch, generator=generator)
+        device_type = next(iter(batch.values())).device.type
+        with torch.autocast(
+            device_type, enabled=self.config.autocast_inference and torch.is_autocast_enabled(device_type)
+        ):
+            return model.sample(batch, generator=generator)
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
