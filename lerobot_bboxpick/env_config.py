@@ -35,6 +35,9 @@ class LegoPickEnvConfig(EnvConfig):
     domain_randomization: bool = True
     # End the episode once a brick has been lifted (its outcome is then decided).
     terminate_on_lift: bool = True
+    # Commanded TCP speed limits (m/s, rad/s), as a real arm's driver enforces them.
+    max_tcp_speed: float = 0.5
+    max_tcp_angular_speed: float = 1.5
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(10,)),
@@ -67,6 +70,8 @@ class LegoPickEnvConfig(EnvConfig):
             "lens": self.lens,
             "domain_randomization": self.domain_randomization,
             "terminate_on_lift": self.terminate_on_lift,
+            "max_tcp_speed": self.max_tcp_speed,
+            "max_tcp_angular_speed": self.max_tcp_angular_speed,
         }
 
     def create_envs(

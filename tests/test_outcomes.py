@@ -22,9 +22,12 @@ def test_expert_pick_is_pick(grid_env):
     grid_env.reset(seed=3)
     expert = ScriptedExpert(np.random.default_rng(3))
     expert.reset(grid_env)
+    speed_limited = 0
     while not expert.done:
         _, reward, _, _, info = grid_env.step(expert.act())
+        speed_limited += info["speed_limited"]
     assert info["outcome"] == "pick" and info["is_success"] is True and reward == 1.0
+    assert speed_limited == 0  # the demos move within the env's TCP speed limits
     # The brick really is up: >= 5 cm above the table, between the fingers.
     assert grid_env.brick_pose(grid_env.target)[2, 3] > 0.05
 

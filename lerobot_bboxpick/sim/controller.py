@@ -13,12 +13,34 @@ from dataclasses import dataclass
 import mink
 import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from lerobot_bboxpick.sim.scene import ARM_JOINTS, build_robot_model
 
 # TCP position limits in the table frame (m): above the table, inside the reach we train and test in.
 WORKSPACE_LOW = np.array([0.15, -0.50, 0.0])
 WORKSPACE_HIGH = np.array([0.85, 0.50, 0.55])
+
+
+def limit_step(
+    T_from: np.ndarray, T_to: np.ndarray, max_distance: float, max_angle: float
+) -> tuple[np.ndarray, bool]:
+    """``T_to`` moved back toward ``T_from`` so the step stays within ``max_distance`` (m) and
+    ``max_angle`` (rad); returns the pose and whether it was limited.
+
+    Translation and rotation are scaled by the same fraction, so the limited step lies on the
+    straight (screw-free) path from ``T_from`` to ``T_to``.
+    """
+    distance = float(np.linalg.norm(T_to[:3, 3] - T_from[:3, 3]))
+    rotvec = Rotation.from_matrix(T_from[:3, :3].T @ T_to[:3, :3]).as_rotvec()
+    angle = float(np.linalg.norm(rotvec))
+    fraction = min(1.0, max_distance / max(distance, 1e-12), max_angle / max(angle, 1e-12))
+    if fraction >= 1.0:
+        return T_to, False
+    T = np.eye(4)
+    T[:3, 3] = T_from[:3, 3] + fraction * (T_to[:3, 3] - T_from[:3, 3])
+    T[:3, :3] = T_from[:3, :3] @ Rotation.from_rotvec(fraction * rotvec).as_matrix()
+    return T, True
 
 
 @dataclass(frozen=True)

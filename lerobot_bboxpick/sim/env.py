@@ -20,7 +20,13 @@ from scipy.spatial.transform import Rotation
 
 from lerobot_bboxpick import geometry
 from lerobot_bboxpick.sim.camera import LENSES, BoxProjection, WristCamera
-from lerobot_bboxpick.sim.controller import WORKSPACE_HIGH, WORKSPACE_LOW, IkResult, TcpIkController
+from lerobot_bboxpick.sim.controller import (
+    WORKSPACE_HIGH,
+    WORKSPACE_LOW,
+    IkResult,
+    TcpIkController,
+    limit_step,
+)
 from lerobot_bboxpick.sim.layouts import Layout, check_setting, describe_target, make_layout
 from lerobot_bboxpick.sim.outcome import OutcomeTracker
 from lerobot_bboxpick.sim.randomization import Randomizer
@@ -88,6 +94,11 @@ class LegoPickOptions:
     domain_randomization: bool = True
     terminate_on_lift: bool = True
     start_jitter: bool = True
+    # Commanded TCP speed limits, as a real arm's driver enforces them (UMI's limits its waypoints
+    # too). The expert moves at most 0.36 m/s and 0.9 rad/s; without a limit a far target makes the
+    # joint-space swing dive the fingers into the table, where friction then holds them.
+    max_tcp_speed: float = 0.5  # m/s
+    max_tcp_angular_speed: float = 1.5  # rad/s
 
 
 class LegoPickEnv(gym.Env):
@@ -106,6 +117,9 @@ class LegoPickEnv(gym.Env):
         check_setting(self.options.setting)
         if self.options.lens not in LENSES:
             raise ValueError(f"lens={self.options.lens!r} is not known; valid lenses: {', '.join(LENSES)}")
+        for name in ("max_tcp_speed", "max_tcp_angular_speed"):
+            if not getattr(self.options, name) > 0:
+                raise ValueError(f"{name}={getattr(self.options, name)!r} must be > 0")
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.options.fps}
         self.model = build_model()
@@ -146,6 +160,7 @@ class LegoPickEnv(gym.Env):
         self.episode_seed: int | None = None
         self._tracker: OutcomeTracker | None = None
         self._q_cmd = np.array(_start_joint_angles())
+        self._T_cmd = self.controller.forward(self._q_cmd)
         self._width_cmd = START_GRIPPER_WIDTH
         self._last_image: np.ndarray | None = None
         self._last_box: BoxProjection | None = None
@@ -244,6 +259,7 @@ class LegoPickEnv(gym.Env):
         self.data.qpos[self.ids.arm_qpos] = q_start
         self.data.qpos[self.ids.finger_qpos] = START_GRIPPER_WIDTH / 2
         self._q_cmd = q_start.copy()
+        self._T_cmd = self.controller.forward(q_start)
         self._width_cmd = START_GRIPPER_WIDTH
         self._write_ctrl(self._q_cmd, self._width_cmd)
         mujoco.mj_forward(self.model, self.data)
@@ -263,7 +279,12 @@ class LegoPickEnv(gym.Env):
         if self._tracker is None:
             raise RuntimeError("call reset() before step()")
         action = self._check_action(action)
-        T = geometry.pose9_to_mat(action[:9])
+        T, speed_limited = limit_step(
+            self._T_cmd,
+            geometry.pose9_to_mat(action[:9]),
+            self.options.max_tcp_speed / self.options.fps,
+            self.options.max_tcp_angular_speed / self.options.fps,
+        )
         width = float(action[9])
         width_clamped = not 0.0 <= width <= MAX_GRIPPER_WIDTH
         width = float(np.clip(width, 0.0, MAX_GRIPPER_WIDTH))
@@ -276,10 +297,10 @@ class LegoPickEnv(gym.Env):
             self._write_ctrl(q_from + a * (ik.q_arm - q_from), w_from + a * (width - w_from))
             mujoco.mj_step(self.model, self.data, nstep=nstep)
             self._tracker.update(self.data)
-        self._q_cmd, self._width_cmd = ik.q_arm, width
+        self._q_cmd, self._width_cmd, self._T_cmd = ik.q_arm, width, T
         self._steps += 1
         obs = self._observe()
-        info = self._info(ik=ik, width_clamped=width_clamped)
+        info = self._info(ik=ik, width_clamped=width_clamped, speed_limited=speed_limited)
         outcome = info["outcome"]
         reward = 1.0 if outcome == "pick" else 0.0
         # A blown-up simulation ends the episode: what follows it is not physics (its outcome stays
@@ -326,7 +347,9 @@ class LegoPickEnv(gym.Env):
         self._last_image, self._last_box = image, box
         return {"pixels": {"wrist": image}, "agent_pos": self.agent_pos(), "bbox": box.bbox.copy()}
 
-    def _info(self, ik: IkResult | None, width_clamped: bool = False) -> dict[str, Any]:
+    def _info(
+        self, ik: IkResult | None, width_clamped: bool = False, speed_limited: bool = False
+    ) -> dict[str, Any]:
         assert self._tracker is not None and self._last_box is not None and self.layout is not None
         outcome = self._tracker.outcome
         return {
@@ -341,6 +364,7 @@ class LegoPickEnv(gym.Env):
             "ik_clamped": bool(ik.clamped) if ik else False,
             "ik_position_error": float(ik.position_error) if ik else 0.0,
             "gripper_width_clamped": width_clamped,
+            "speed_limited": speed_limited,
             "sim_unstable": self._tracker.unstable,
         }
 
