@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import mink
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from lerobot_bboxpick import geometry
 from lerobot_bboxpick.sim.scene import ARM_JOINTS, build_robot_model
 
 # TCP position limits in the table frame (m): above the table, inside the reach we train and test in.
@@ -32,14 +32,14 @@ def limit_step(
     straight (screw-free) path from ``T_from`` to ``T_to``.
     """
     distance = float(np.linalg.norm(T_to[:3, 3] - T_from[:3, 3]))
-    rotvec = Rotation.from_matrix(T_from[:3, :3].T @ T_to[:3, :3]).as_rotvec()
+    rotvec = geometry.mat_to_axis_angle(T_from[:3, :3].T @ T_to[:3, :3])
     angle = float(np.linalg.norm(rotvec))
     fraction = min(1.0, max_distance / max(distance, 1e-12), max_angle / max(angle, 1e-12))
     if fraction >= 1.0:
         return T_to, False
     T = np.eye(4)
     T[:3, 3] = T_from[:3, 3] + fraction * (T_to[:3, 3] - T_from[:3, 3])
-    T[:3, :3] = T_from[:3, :3] @ Rotation.from_rotvec(fraction * rotvec).as_matrix()
+    T[:3, :3] = T_from[:3, :3] @ geometry.axis_angle_to_mat(fraction * rotvec)
     return T, True
 
 
