@@ -16,17 +16,17 @@ STEPS=${STEPS:-1500}  # 12-14 min at 1.8-2.1 steps/s (batch 32, bf16 autocast) o
 # does not read the bbox at all (README, "The canary").
 MASK_CENTROID=${MASK_CENTROID:-true}
 EXEC_STEPS=${EXEC_STEPS:-8 12 16}
-[ -d "$OUT/data" ] || python -m lerobot_bboxpick.canary record --root "$OUT/data" --seed "$SEED" \
+[ -d "$OUT/data" ] || python -m lerobot_bboxpick.apps.canary record --root "$OUT/data" --seed "$SEED" \
   --episodes 5 --targets "$TARGETS"
 rm -rf "$OUT/train"
-OMP_NUM_THREADS=2 lerobot-train --policy.type=bbox_diffusion --policy.preset=cpu --policy.device=cpu \
+OMP_NUM_THREADS=2 lerobot-train --policy.type=bbox_diffusion --policy.device=cpu \
   --policy.use_amp=true --policy.mask_centroid="$MASK_CENTROID" --policy.scheduler_warmup_steps=100 \
   --dataset.repo_id=local/canary --dataset.root="$OUT/data" --output_dir="$OUT/train" \
   --steps="$STEPS" --batch_size=32 --num_workers=1 --save_freq=500 --log_freq=50 --wandb.enable=false
 CKPT="$OUT/train/checkpoints/last/pretrained_model"
 for n in $EXEC_STEPS; do
   echo "[canary] executing $n of 16 steps per chunk"
-  python -m lerobot_bboxpick.canary evaluate --policy "$CKPT" --seed "$SEED" --runs 5 --targets "$TARGETS" \
+  python -m lerobot_bboxpick.apps.canary evaluate --policy "$CKPT" --seed "$SEED" --runs 5 --targets "$TARGETS" \
     --n-action-steps "$n" --video-dir "$OUT/videos/exec$n"
 done
-python -m lerobot_bboxpick.canary sensitivity --policy "$CKPT" --seed "$SEED"
+python -m lerobot_bboxpick.apps.canary sensitivity --policy "$CKPT" --seed "$SEED"

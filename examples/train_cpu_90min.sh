@@ -7,7 +7,7 @@
 #
 #   1. bboxpick-collect --repo_id=local/lego_pick_full --root=outputs/main/full/data \
 #        --settings=grid_id,identical_4 --episodes=200 --workers=2 --resume=true       (~9 min)
-#   2. lerobot-train --policy.type=bbox_diffusion --policy.preset=cpu --policy.bbox_mode=mask \
+#   2. lerobot-train --policy.type=bbox_diffusion --policy.bbox_mode=mask \
 #        --policy.mask_centroid=true --policy.device=cpu --policy.scheduler_warmup_steps=300 \
 #        --policy.n_action_steps=12 --policy.use_amp=true --dataset.repo_id=local/lego_pick_full \
 #        --dataset.root=outputs/main/full/data --output_dir=outputs/main/full/train \

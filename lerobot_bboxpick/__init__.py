@@ -10,8 +10,8 @@ import os
 # imported anywhere in the process, and every sim module is reached through this package.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from lerobot_bboxpick.env_config import LegoPickEnvConfig  # noqa: E402
 from lerobot_bboxpick.policies.bbox_diffusion import BboxDiffusionConfig  # noqa: E402
+from lerobot_bboxpick.sim.env_config import LegoPickEnvConfig  # noqa: E402
 
 __all__ = ["BboxDiffusionConfig", "LegoPickEnvConfig"]
 __version__ = "0.1.0"

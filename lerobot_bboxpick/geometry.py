@@ -189,6 +189,18 @@ def absolute_pose9_torch(rel: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
     return _pose9_from_torch(pos, R)
 
 
+def relative_pose10_torch(poses: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
+    """UMI's ``inv(T_base) @ T`` on the pose9 part of (..., T, 10) poses, base (..., 10); width kept."""
+    rel9 = relative_pose9_torch(poses[..., :9], base[..., None, :9])
+    return torch.cat([rel9, poses[..., 9:].to(rel9.dtype)], dim=-1)
+
+
+def absolute_pose10_torch(rel: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
+    """``T_base @ T_rel`` on (..., T, 10) relative poses, base (..., 10); width kept absolute."""
+    abs9 = absolute_pose9_torch(rel[..., :9], base[..., None, :9])
+    return torch.cat([abs9, rel[..., 9:]], dim=-1)
+
+
 # --------------------------------------------------------------------------- mirroring (augmentation)
 def mirror_pose10(p10: np.ndarray, axis: str = "y") -> np.ndarray:
     """Mirror table-frame poses across the plane ``axis = 0`` (default y = 0, the x-z plane).

@@ -1,4 +1,4 @@
-"""Pictures a person looks at: annotated wrist frames, contact sheets, videos."""
+"""All drawing code: annotated wrist frames, contact sheets, videos, result charts."""
 
 from __future__ import annotations
 
@@ -44,4 +44,49 @@ def save_mp4(path: str | Path, frames: list[np.ndarray], fps: int) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_video(path, frames, fps)
+    return path
+
+
+def draw_bbox(
+    image: np.ndarray, bbox: np.ndarray, color: tuple[int, int, int] = (255, 255, 255)
+) -> np.ndarray:
+    """Draw a normalised bbox on an RGB image in place (and return it)."""
+    h, w = image.shape[:2]
+    x0, y0, x1, y1 = (np.asarray(bbox) * [w, h, w, h]).round().astype(int)
+    cv2.rectangle(image, (int(x0), int(y0)), (int(x1) - 1, int(y1) - 1), color, 1)
+    return image
+
+
+def outcome_bars(rows: list[dict], outcomes: tuple[str, ...], path: Path) -> Path:
+    """Grouped bars: one panel per outcome, settings on the x axis, one bar per policy, Wilson error bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    settings = list(dict.fromkeys(r["setting"] for r in rows))
+    fig, axes = plt.subplots(1, len(outcomes), figsize=(4 * len(outcomes), 3.6), sharey=True)
+    width = 0.8 / len(policies)
+    x = np.arange(len(settings))
+    for ax, outcome in zip(axes, outcomes, strict=True):
+        for i, policy in enumerate(policies):
+            sel = [next(r for r in rows if r["policy"] == policy and r["setting"] == s) for s in settings]
+            rate = np.array([100 * r[f"{outcome}_rate"] for r in sel])
+            err = np.array(
+                [
+                    [rate[j] - 100 * r[f"{outcome}_ci_low"], 100 * r[f"{outcome}_ci_high"] - rate[j]]
+                    for j, r in enumerate(sel)
+                ]
+            ).T
+            ax.bar(x + (i - (len(policies) - 1) / 2) * width, rate, width, yerr=err, capsize=2, label=policy)
+        ax.set_title(outcome.capitalize())
+        ax.set_xticks(x, settings, rotation=35, ha="right", fontsize=8)
+        ax.set_ylim(0, 105)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("% of episodes (Wilson 95% CI)")
+    axes[-1].legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
     return path

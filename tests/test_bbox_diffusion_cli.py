@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import MISSING
 from pathlib import Path
 
 import pytest
@@ -62,21 +63,36 @@ def checkpoint(dataset, tmp_path_factory):
 def test_bad_options_name_the_field_and_the_allowed_values():
     from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
 
-    with pytest.raises(ValueError, match="mask_centroid=true needs bbox_mode='mask'"):
-        BboxDiffusionConfig(bbox_mode="none", mask_centroid=True)
     with pytest.raises(ValueError, match="bbox_mode='box' is not one of mask, lowdim, none"):
         BboxDiffusionConfig(bbox_mode="box")
+    with pytest.raises(ValueError, match="pooling='avg' must be 'default' or 'spatial_softmax'"):
+        BboxDiffusionConfig(pooling="avg")
 
 
-def test_presets_fill_only_what_the_user_left_unset():
-    """The cpu preset brings the recipe's 12 executed steps and the mask centroid; the ablation modes
-    never get the centroid from a preset, and an explicit value always wins."""
-    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+def test_defaults_are_what_the_policy_uses():
+    """The dataclass (and so --help) shows the real defaults: the CPU recipe's for bbox_diffusion, the
+    paper's for bbox_diffusion_paper; only the mask centroid is switched off for the no-mask ablations."""
+    from lerobot.configs import PreTrainedConfig
+
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
+        BboxDiffusionConfig,
+        BboxDiffusionPaperConfig,
+    )
 
     cpu = BboxDiffusionConfig()
-    assert (cpu.n_action_steps, cpu.mask_centroid) == (12, True)
-    paper = BboxDiffusionConfig(preset="paper")
-    assert (paper.n_action_steps, paper.mask_centroid) == (8, False)
+    assert (cpu.backbone, cpu.image_size, cpu.n_action_steps, cpu.mask_centroid) == ("resnet18", 96, 12, True)
+    ours = set(BboxDiffusionConfig.__dataclass_fields__) - set(PreTrainedConfig.__dataclass_fields__)
+    fields = {n: f for n, f in BboxDiffusionConfig.__dataclass_fields__.items() if n in ours}
+    assert len(fields) > 30
+    assert all(getattr(cpu, n) == f.default for n, f in fields.items() if f.default is not MISSING)
+    paper = BboxDiffusionPaperConfig()
+    assert (paper.backbone, paper.image_size, paper.n_action_steps, paper.pretrained_backbone) == (
+        "vit_large_patch14_clip_224.openai",
+        224,
+        8,
+        True,
+    )
+    assert PreTrainedConfig.get_choice_class("bbox_diffusion_paper") is BboxDiffusionPaperConfig
     for mode in ("none", "lowdim"):
         assert BboxDiffusionConfig(bbox_mode=mode).mask_centroid is False
     explicit = BboxDiffusionConfig(mask_centroid=False, n_action_steps=4)
@@ -86,12 +102,11 @@ def test_presets_fill_only_what_the_user_left_unset():
 def test_train_saves_a_loadable_checkpoint_with_its_processors(checkpoint):
     config = json.loads((checkpoint / "config.json").read_text())
     assert config["type"] == "bbox_diffusion" and config["bbox_mode"] == "mask"
-    pre = (checkpoint / "policy_preprocessor.json").read_text()
-    post = (checkpoint / "policy_postprocessor.json").read_text()
-    assert "bbox_diffusion_relative_pose" in pre and "bbox_diffusion_absolute_pose" in post
-    # The relative/absolute pair is linked by the same id in both files.
-    pair_pre = json.loads(pre)["steps"][-1]["config"]["pair_id"]
-    assert pair_pre in post
+    pre = json.loads((checkpoint / "policy_preprocessor.json").read_text())
+    post = json.loads((checkpoint / "policy_postprocessor.json").read_text())
+    # LeRobot's own steps only: the policy itself returns absolute poses (no pose state to pair).
+    assert [s["registry_name"] for s in post["steps"]] == ["unnormalizer_processor", "device_processor"]
+    assert "normalizer_processor" in [s["registry_name"] for s in pre["steps"]]
 
 
 def test_eval_runs_the_checkpoint_in_lego_pick(checkpoint, tmp_path):
@@ -114,13 +129,14 @@ def test_eval_runs_the_checkpoint_in_lego_pick(checkpoint, tmp_path):
     assert info["overall"]["n_episodes"] == 1 and info["overall"]["pc_success"] == 0.0
 
 
-def test_checkpoint_actions_are_made_absolute_from_the_observed_pose(checkpoint):
-    """The loaded postprocessor turns the policy's relative action into T_observed @ T_rel: the
-    relative/absolute pair is wired after loading (not returning raw relative poses)."""
+def test_checkpoint_actions_are_absolute_poses_composed_with_the_observed_pose(checkpoint):
+    """A loaded checkpoint returns T_observed @ T_rel from select_action itself (no hidden state in the
+    processors): the postprocessor leaves it unchanged and it equals the model's relative sample
+    composed with the observed pose."""
     import torch
 
     from lerobot_bboxpick.eval.rollout import PolicyRunner
-    from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import absolute_pose10_torch
+    from lerobot_bboxpick.geometry import absolute_pose10_torch
     from lerobot_bboxpick.sim.env import LegoPickEnv
 
     runner = PolicyRunner.from_pretrained(checkpoint)
@@ -129,10 +145,16 @@ def test_checkpoint_actions_are_made_absolute_from_the_observed_pose(checkpoint)
     env.close()
     runner.reset()
     batch = runner.observation_batch(obs, info["task"])
+    n_obs = runner.policy.config.n_obs_steps
+    stacked = {
+        k: v[:, None].repeat_interleave(n_obs, dim=1) for k, v in batch.items() if k in runner.policy._queues
+    }
     torch.manual_seed(0)
-    relative = runner.policy.select_action(batch)
-    absolute = runner.postprocessor(relative)
+    relative = runner.policy._inference_model().sample(stacked)
+    torch.manual_seed(0)
+    action = runner.policy.select_action(batch)
+    assert torch.equal(runner.postprocessor(action), action)
     state = torch.as_tensor(obs["agent_pos"])[None]
-    expected = absolute_pose10_torch(relative[:, None], state)[:, 0]
-    assert (absolute - expected).abs().max() < 1e-5
-    assert (absolute - relative).abs().max() > 0.1  # it did change: the TCP is ~0.5 m from the origin
+    expected = absolute_pose10_torch(relative[:, :1], state)[:, 0]
+    assert (action - expected).abs().max() < 1e-5
+    assert (action - relative[:, 0]).abs().max() > 0.1  # composed: the TCP is ~0.5 m from the origin

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import cv2
 
-from lerobot_bboxpick.cli import main
+from lerobot_bboxpick.apps.cli import main
 
 BIN = Path(sys.executable).parent
 
@@ -46,25 +46,61 @@ def test_run_trains_the_recipe_and_the_ablation_without_a_centroid(tmp_path):
     only by its bbox mode (no centroid: it has no mask to measure); a finished checkpoint resumes."""
     from dataclasses import replace
 
-    from lerobot_bboxpick.pipeline import PROFILES, train_command
+    from lerobot_bboxpick.apps.main_job import PROFILES, train_command
 
     full = PROFILES["full"]
-    args = train_command(full, tmp_path / "data", "local/x", tmp_path / "train")
+    args = train_command(full, tmp_path / "data", "local/x", tmp_path / "train", 5000, True)
     recipe = {"--policy.bbox_mode=mask", "--policy.mask_centroid=true", "--policy.n_action_steps=12"}
     assert recipe <= set(args)
     assert "--steps=5000" in args and "--batch_size=32" in args
-    ablation = train_command(replace(full, bbox_mode="none"), tmp_path / "data", "local/x", tmp_path / "t")
+    ablation = train_command(
+        replace(full, bbox_mode="none"), tmp_path / "data", "local/x", tmp_path / "t", 5000, True
+    )
     assert {"--policy.bbox_mode=none", "--policy.mask_centroid=false"} <= set(ablation)
     assert set(args) - set(ablation) == {
         "--policy.bbox_mode=mask",
         "--policy.mask_centroid=true",
         f"--output_dir={tmp_path / 'train'}",
     }
-    assert "--policy.use_amp=true" in args  # the recipe trains under bf16 autocast
-    fp32 = train_command(replace(full, use_amp=False), tmp_path / "data", "local/x", tmp_path / "train")
+    assert "--policy.use_amp=true" in args
+    fp32 = train_command(full, tmp_path / "data", "local/x", tmp_path / "train", 5000, False)
     assert set(fp32) - set(args) == {"--policy.use_amp=false"}
     last = tmp_path / "train" / "checkpoints" / "last" / "pretrained_model"
     last.mkdir(parents=True)
     (last / "train_config.json").write_text("{}")
-    resumed = train_command(full, tmp_path / "data", "local/x", tmp_path / "train")
-    assert resumed[1:] == [f"--config_path={last / 'train_config.json'}", "--resume=true", "--steps=5000"]
+    resumed = train_command(full, tmp_path / "data", "local/x", tmp_path / "train", 5000, True)
+    assert resumed[1:] == [
+        f"--config_path={last / 'train_config.json'}",
+        "--resume=true",
+        "--steps=5000",
+        "--save_freq=1000",
+    ]
+
+
+def test_quick_training_is_sized_by_its_time_budget_and_full_by_its_samples():
+    """Steps follow the measured rate: a 3x slower machine trains 3x fewer steps in the same minutes;
+    the recipe keeps its fixed sample budget on any machine."""
+    from lerobot_bboxpick.apps.main_job import (
+        _STEP_LINE,
+        CALIBRATION_STEPS,
+        PROFILES,
+        _parse_count,
+        budget_steps,
+    )
+
+    quick = PROFILES["quick"]
+    fast, slow = budget_steps(quick, 0.3), budget_steps(quick, 0.9)
+    assert fast == int(quick.train_minutes * 60 / 0.3) < quick.steps
+    assert abs(fast / slow - 3.0) < 0.01
+    assert budget_steps(quick, 0.01) == quick.steps  # capped
+    assert budget_steps(quick, 1000.0) == CALIBRATION_STEPS  # never below the calibration itself
+    assert (
+        budget_steps(PROFILES["full"], 0.2) == budget_steps(PROFILES["full"], 2.0) == PROFILES["full"].steps
+    )
+    line = (
+        "INFO 2026-12-01 lerobot_train.py:400 step:1K smpl:32K ep:190 epch:1.07 loss:0.120 grdn:0.5 "
+        "lr:3.0e-04 updt_s:0.412 data_s:0.013"
+    )
+    m = _STEP_LINE.search(line)
+    assert _parse_count(m.group(1)) == 1000 and float(m.group(2)) + float(m.group(3)) == 0.425
+    assert _parse_count("1.2K") == 1200 and _parse_count("40") == 40

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from lerobot_bboxpick.expert import ScriptedExpert
 from lerobot_bboxpick.sim.env import LegoPickEnv, start_pose10
+from lerobot_bboxpick.sim.expert import ScriptedExpert
 from lerobot_bboxpick.sim.layouts import SETTINGS
 from lerobot_bboxpick.sim.scene import BRICK_COLORS
 
@@ -165,3 +165,25 @@ def test_domain_randomisation_switch():
     assert np.ptp(np.array(table_off), axis=0).max() == 0.0
     on.close()
     off.close()
+
+
+def test_each_setting_draws_its_own_scenes():
+    """The same seed gives grid_id and the identical settings different scenes (not one scene set
+    recoloured); the identical settings put their same-colour bricks on random slots, adjacent ones too."""
+    from lerobot_bboxpick.sim.layouts import GRID_PITCH, make_layout, scene_rng
+
+    adjacent = 0
+    for seed in range(30):
+        grid = make_layout("grid_id", scene_rng("grid_id", seed))
+        for setting in ("identical_2", "identical_4"):
+            other = make_layout(setting, scene_rng(setting, seed))
+            assert not np.allclose(other.positions, grid.positions)
+            twins = [i for i, c in enumerate(other.colors) if c == other.target_color]
+            assert len(twins) == int(setting[-1])
+            d = np.linalg.norm(other.positions[twins, None, :2] - other.positions[None, twins, :2], axis=-1)
+            adjacent += bool(((d > 0) & (d < 1.2 * GRID_PITCH)).any())
+    assert adjacent >= 10  # neighbours of the same colour happen often
+    # Yet a scene is still a pure function of (setting, seed).
+    a = make_layout("identical_4", scene_rng("identical_4", 3))
+    b = make_layout("identical_4", scene_rng("identical_4", 3))
+    assert np.array_equal(a.positions, b.positions) and a.colors == b.colors and a.target == b.target

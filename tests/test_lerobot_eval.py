@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from tiny_policy import save_tiny_policy
 
-from lerobot_bboxpick.env_config import LegoPickEnvConfig
+from lerobot_bboxpick.sim.env_config import LegoPickEnvConfig
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
 LEROBOT_EVAL = Path(sys.executable).parent / "lerobot-eval"

@@ -2,7 +2,7 @@
 
 import torch
 
-from lerobot_bboxpick.bench import _policy_features
+from lerobot_bboxpick.apps.bench import _policy_features
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
 

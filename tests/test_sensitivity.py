@@ -8,8 +8,8 @@ def test_shift_is_zero_when_the_bbox_cannot_matter(tmp_path, mask_centroid: bool
     """At initialisation the mask channel's weights are zero, so moving the bbox between two identical
     bricks cannot move the chunk: the check must report exactly 0. With ``mask_centroid`` the box's
     position reaches the UNet even at initialisation, and the check must see the chunk move."""
-    from lerobot_bboxpick.bench import save_random_checkpoint
-    from lerobot_bboxpick.canary import target_sensitivity
+    from lerobot_bboxpick.apps.bench import save_random_checkpoint
+    from lerobot_bboxpick.apps.canary import target_sensitivity
 
     path = save_random_checkpoint(tmp_path / "ckpt", mask_centroid=mask_centroid, num_inference_steps=4)
     result = target_sensitivity(path, seed=10000, samples=2)
@@ -32,12 +32,12 @@ def test_canary_designates_two_neighbouring_bricks_of_one_scene(tmp_path) -> Non
     import numpy as np
     import pandas as pd
 
-    from lerobot_bboxpick.canary import canary_targets, record
+    from lerobot_bboxpick.apps.canary import canary_targets, record
     from lerobot_bboxpick.data.features import EPISODE_TARGET
-    from lerobot_bboxpick.sim.layouts import make_layout
+    from lerobot_bboxpick.sim.layouts import make_layout, scene_rng
 
     first, second = canary_targets(0, 2)
-    layout = make_layout("grid_id", np.random.default_rng(0))
+    layout = make_layout("grid_id", scene_rng("grid_id", 0))
     assert first == layout.target and second != first
     gap = np.linalg.norm(layout.positions[first] - layout.positions[second])
     assert abs(gap - 0.075) < 0.01, f"neighbours {first}, {second} are {gap * 1000:.0f} mm apart"

@@ -21,7 +21,7 @@ from lerobot_bboxpick.sim.outcome import OUTCOMES
 
 def _random_checkpoint(path: Path) -> Path:
     """A tiny randomly initialised bbox_diffusion checkpoint, saved as lerobot-train saves one."""
-    from lerobot_bboxpick.bench import save_random_checkpoint
+    from lerobot_bboxpick.apps.bench import save_random_checkpoint
 
     return save_random_checkpoint(
         path,
@@ -144,3 +144,61 @@ def test_bad_options_name_the_field(tmp_path: Path) -> None:
     )
     assert result.returncode != 0 and "episodes" in result.stderr
     assert not (tmp_path / "episodes.jsonl").exists()
+
+
+def test_resume_is_refused_after_the_checkpoint_weights_change(tmp_path: Path) -> None:
+    """Episodes are keyed on a digest of the weights and the behaviour options: a re-run after more
+    training (or with another n_action_steps) never mixes into the old table."""
+    import torch
+
+    from lerobot_bboxpick.eval.suite import weights_digest
+
+    torch.manual_seed(0)
+    ckpt = _random_checkpoint(tmp_path / "ckpt")
+    out = tmp_path / "suite"
+
+    def cfg(**kw) -> SuiteConfig:
+        options = dict(policies=f"p={ckpt}", settings="grid_id", episodes=1, workers=1, videos=0, max_steps=3)
+        return SuiteConfig(out_dir=out, **{**options, **kw})
+
+    run_suite(cfg())
+    first = read_episodes(out / "episodes.jsonl")
+    old_digest = weights_digest(str(ckpt))
+    assert first[0]["run_key"]["weights"] == old_digest and first[0]["run_key"]["n_action_steps"] == 12
+    run_suite(cfg())  # same weights, same options: resumes, nothing re-run
+    assert read_episodes(out / "episodes.jsonl") == first
+
+    torch.manual_seed(1)
+    _random_checkpoint(ckpt)  # "more training": other weights under the same path and label
+    new_digest = weights_digest(str(ckpt))
+    assert new_digest != old_digest
+    with pytest.raises(ValueError, match=f"run as .*{old_digest}.*this run is .*{new_digest}"):
+        run_suite(cfg())
+    assert read_episodes(out / "episodes.jsonl") == first  # the refused run changed nothing
+    with pytest.raises(ValueError, match="n_action_steps"):
+        run_suite(cfg(n_action_steps=8))
+
+    run_suite(cfg(fresh=True))  # asked for: the old episodes move aside, the new run starts over
+    now = read_episodes(out / "episodes.jsonl")
+    assert len(now) == 1 and now[0]["run_key"]["weights"] == new_digest
+    aside = list(out.glob("episodes.*.jsonl"))
+    assert len(aside) == 1 and read_episodes(aside[0]) == first
+
+
+def test_the_noisy_bbox_source_reaches_the_policy_at_its_iou(tmp_path: Path) -> None:
+    cfg = SuiteConfig(
+        policies="expert",
+        settings="grid_id",
+        episodes=2,
+        workers=1,
+        videos=0,
+        max_steps=40,
+        bbox_source="noisy",
+        noisy_iou=0.6,
+        out_dir=tmp_path,
+    )
+    table = run_suite(cfg)
+    records = read_episodes(tmp_path / "episodes.jsonl")
+    assert [r["bbox_source"] for r in records] == ["noisy", "noisy"]
+    assert all(abs(r["bbox_mean_iou"] - 0.6) < 0.02 for r in records), records
+    assert "bbox source: noisy (IoU 0.6" in table.read_text()

@@ -37,7 +37,7 @@ from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
 from lerobot.policies.factory import make_pre_post_processors
 from lerobot.utils.constants import ACTION
 
-from lerobot_bboxpick.env_config import LegoPickEnvConfig
+from lerobot_bboxpick.sim.env_config import LegoPickEnvConfig
 
 STATS_SEEDS = (0, 1)
 STATS_STEPS = 4

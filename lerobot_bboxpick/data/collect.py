@@ -1,7 +1,11 @@
 """``bboxpick-collect``: scripted-expert demonstrations into a LeRobotDataset v3.
 
     bboxpick-collect --repo_id=local/lego_pick_expert --root=outputs/datasets/expert \
-        --settings=grid_id --episodes=50 --seed_start=0 --workers=2
+        --settings=grid_id --episodes=50 --workers=2
+    bboxpick-collect ... --split=validation   # an evaluation dataset from seeds 5000-9999
+
+Demonstrations come from the training seeds (0-4999, ``lerobot_bboxpick.seeds``); a seed at or above
+5000 is refused unless ``--split`` says the dataset is for validation or test.
 
 How it stays safe to interrupt:
 * Work is split into shards of a few seeds. A worker records a shard as its own small
@@ -27,12 +31,14 @@ import draccus
 import numpy as np
 from tqdm import tqdm
 
+from lerobot_bboxpick import seeds
 from lerobot_bboxpick.data.features import (
     EPISODE_OUTCOME,
     create_dataset,
     make_frame,
     outcome_code,
 )
+from lerobot_bboxpick.quiet import quiet_libraries, redirect_native_output
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 
 SHARD_SIZE = 5
@@ -49,22 +55,34 @@ class CollectConfig:
     settings: str = "grid_id"
     # Episodes to end up with in the dataset (kept ones).
     episodes: int = 50
-    seed_start: int = 0
+    # Seed split the episodes come from (lerobot_bboxpick.seeds): "train" (0-4999) for demonstrations;
+    # "validation" (5000-9999) or "test" (10000+) only when making an evaluation dataset.
+    split: str = "train"
+    # First seed; None starts at the split's first seed. Every seed used must lie in ``split``.
+    seed_start: int | None = None
     workers: int = 1
     keep_failed: bool = False
     resume: bool = False
     # Episodes per shard: the most work an interruption can lose.
     shard_size: int = SHARD_SIZE
     push_to_hub: bool = False
+    # Where the workers' own output (the video encoder's log lines) goes; None: <root>.collect/workers.log.
+    log_file: Path | None = None
 
     def __post_init__(self) -> None:
         self.root = Path(self.root)
+        self.log_file = Path(self.log_file) if self.log_file else self.work_dir / "workers.log"
         if not self.setting_list:
             raise ValueError(f"settings={self.settings!r} is empty; valid settings: {', '.join(SETTINGS)}")
-        for name, minimum in (("episodes", 1), ("workers", 1), ("shard_size", 1), ("seed_start", 0)):
+        for name, minimum in (("episodes", 1), ("workers", 1), ("shard_size", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+        seeds.check_split(self.split)
+        if self.seed_start is None:
+            self.seed_start = seeds.SPLITS[self.split][0]
+        # At least the first `episodes` seeds are used; more when the expert fails some.
+        seeds.check_seeds_in_split(self.seed_start, self.seed_start + self.episodes - 1, self.split)
 
     @property
     def setting_list(self) -> tuple[str, ...]:
@@ -90,6 +108,7 @@ class ShardTask:
     settings: tuple[str, ...]
     repo_id: str
     keep_failed: bool
+    log_file: Path | None = None
 
 
 def record_episode(
@@ -100,7 +119,7 @@ def record_episode(
     ``rng_seed`` seeds the expert's own variation (speed, approach offset); default: ``seed``.
     ``options`` go to ``env.reset`` (e.g. ``{"target": k}`` to designate another brick of the scene).
     """
-    from lerobot_bboxpick.expert import ScriptedExpert
+    from lerobot_bboxpick.sim.expert import ScriptedExpert
 
     obs, info = env.reset(seed=seed, options=options)
     expert = ScriptedExpert(np.random.default_rng(seed if rng_seed is None else rng_seed))
@@ -138,6 +157,9 @@ def record_shard(task: ShardTask) -> list[dict]:
 
     import lerobot_bboxpick  # noqa: F401  (MUJOCO_GL before mujoco, in spawned workers too)
     from lerobot_bboxpick.sim.env import LegoPickEnv
+
+    if task.log_file is not None:
+        redirect_native_output(task.log_file)
 
     partial = task.path.with_name(task.path.name + ".partial")
     shutil.rmtree(partial, ignore_errors=True)
@@ -215,6 +237,7 @@ def collect(cfg: CollectConfig) -> dict:
             f"{cfg.work_dir} holds shards of an interrupted collection; pass --resume=true to finish it"
         )
     cfg.work_dir.mkdir(parents=True, exist_ok=True)
+    print(f"collect: workers' own output (video encoder) -> {cfg.log_file}", flush=True)
     for stale in cfg.work_dir.glob("*.partial"):  # an interrupted shard: redo it
         shutil.rmtree(stale)
     records = attempted(cfg.work_dir)
@@ -224,8 +247,10 @@ def collect(cfg: CollectConfig) -> dict:
     progress = tqdm(total=cfg.episodes, initial=min(kept, cfg.episodes), desc="episodes kept", unit="ep")
     with ctx.Pool(cfg.workers) as pool:
         while kept < cfg.episodes:
-            seeds = list(range(next_seed, next_seed + cfg.episodes - kept))
-            next_seed += len(seeds)
+            batch = list(range(next_seed, next_seed + cfg.episodes - kept))
+            # Expert failures use up seeds: refuse to spill over into the next split.
+            seeds.check_seeds_in_split(cfg.seed_start, batch[-1], cfg.split)
+            next_seed += len(batch)
             tasks = [
                 ShardTask(
                     path=cfg.work_dir / f"shard_{chunk[0]:08d}",
@@ -233,8 +258,9 @@ def collect(cfg: CollectConfig) -> dict:
                     settings=tuple(cfg.setting_of(s) for s in chunk),
                     repo_id=cfg.repo_id,
                     keep_failed=cfg.keep_failed,
+                    log_file=cfg.log_file,
                 )
-                for chunk in (seeds[i : i + cfg.shard_size] for i in range(0, len(seeds), cfg.shard_size))
+                for chunk in (batch[i : i + cfg.shard_size] for i in range(0, len(batch), cfg.shard_size))
             ]
             for shard_records in pool.imap_unordered(record_shard, tasks):
                 records.extend(shard_records)
@@ -243,6 +269,7 @@ def collect(cfg: CollectConfig) -> dict:
                 progress.update(n)
                 progress.set_postfix(attempted=len(records))
     progress.close()
+    quiet_libraries()
     total = aggregate(cfg)
     outcomes = {o: sum(r["outcome"] == o for r in records) for o in ("pick", "wrong", "contact", "empty")}
     summary = {"root": str(cfg.root), "episodes": total, "attempted": len(records), "outcomes": outcomes}

@@ -10,13 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from lerobot_bboxpick.keys import ACTION, BBOX, STATE, WRIST_IMAGE
 from lerobot_bboxpick.sim.layouts import SETTINGS
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
-WRIST_IMAGE = "observation.images.wrist"
-STATE = "observation.state"
-BBOX = "observation.bbox"
-ACTION = "action"
 POSE10_NAMES = ["x", "y", "z", "r00", "r01", "r02", "r10", "r11", "r12", "gripper_width"]
 # Per-episode columns; the integer codes index SETTINGS and OUTCOMES (-1: not known, e.g. real data).
 EPISODE_SEED = "episode.seed"

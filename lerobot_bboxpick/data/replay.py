@@ -82,8 +82,7 @@ def frame_image(dataset, index: int) -> np.ndarray:
 
 def dataset_sheet(repo_id: str, root: str | Path, episodes: list[int]) -> np.ndarray:
     """First and last frame of each episode with its recorded bbox drawn, two columns a row."""
-    from lerobot_bboxpick.sim.env import draw_bbox
-    from lerobot_bboxpick.viz import contact_sheet, label
+    from lerobot_bboxpick.viz import contact_sheet, draw_bbox, label
 
     dataset = load_dataset(repo_id, root)
     tiles = []

@@ -96,6 +96,116 @@ def _components(mask: np.ndarray, offset: tuple[int, int]) -> tuple[np.ndarray, 
     return np.concatenate([xy, xy + stats[1:, 2:4]], axis=1), labels
 
 
+class BoxTracker:
+    """Online form of :func:`track_bbox`: give it the first frame and box, then one frame at a time.
+
+    Used closed loop (the suite's ``tracked`` bbox source) as well as offline (``track_bbox``).
+    """
+
+    def __init__(
+        self,
+        first_frame: np.ndarray,
+        first_box: np.ndarray,
+        *,
+        threshold: float = 0.5,
+        adapt_rate: float = 0.03,
+        min_area_ratio: float = 0.35,
+        max_area_ratio: float = 3.0,
+    ) -> None:
+        frame = _check_frame(first_frame, "first_frame")
+        b0 = np.clip(np.asarray(first_box, dtype=np.float64).reshape(-1), 0, 1)
+        if b0.shape != (4,) or not (b0[2] > b0[0] and b0[3] > b0[1]):
+            raise ValueError(
+                "first_box must be a normalised (4,) x0, y0, x1, y1 with x1 > x0, y1 > y0 inside the "
+                f"image, got {first_box!r}"
+            )
+        self.threshold, self.adapt_rate = threshold, adapt_rate
+        self.min_area_ratio, self.max_area_ratio = min_area_ratio, max_area_ratio
+        self.H, self.W = frame.shape[:2]
+        self.scale = np.array([self.W, self.H, self.W, self.H], dtype=np.float64)
+        self.box = b0 * self.scale  # pixels
+        self.last = b0.astype(np.float32)  # normalised, the last box found
+        H, W, box = self.H, self.W, self.box
+        q = _quantise(frame)
+        # Centre-weighted first model: the target fills the box centre, occluders and neighbours its rim.
+        yy, xx = np.mgrid[0:H, 0:W] + 0.5
+        c, half = (box[:2] + box[2:]) / 2, (box[2:] - box[:2]) / 2
+        kernel = np.exp(
+            -0.5
+            * (
+                ((xx - c[0]) / (_KERNEL_SIGMA * half[0])) ** 2
+                + ((yy - c[1]) / (_KERNEL_SIGMA * half[1])) ** 2
+            )
+        )
+        self.fg, self.bg = self._model(q, box, kernel * _box_mask((H, W), box))
+        self.velocity = np.zeros(2)
+        self.n_lost = 0
+
+    def _model(self, q: np.ndarray, b: np.ndarray, fg_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        size = max(b[2] - b[0], b[3] - b[1])
+        ring = _box_mask((self.H, self.W), b, grow=max(2 * size, 12)) & (
+            1 - _box_mask((self.H, self.W), b, grow=1)
+        )
+        return _hist(q, fg_weights), _hist(q, ring)
+
+    def update(self, frame: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The target's normalised box in ``frame`` and whether it was lost (then: the last box found)."""
+        frame = _check_frame(frame, "frame")
+        H, W, box = self.H, self.W, self.box
+        q = _quantise(frame)
+        fg, bg = self.fg, self.bg
+        # Any colour likelier on the target than around it; its core: the model's dominant colours
+        # (a finger pad or a neighbour brick in the first box is a minor colour, and left out).
+        loose = fg / (fg + bg + 1e-12)
+        core = np.where(fg >= _CORE_FRACTION * fg.max(), loose, 0.0)
+        size = box[2:] - box[:2]
+        pred = box + np.tile(self.velocity, 2)
+        margin = (max(size) + 6) * (1 + 0.5 * min(self.n_lost, 6))  # search wider the longer it is lost
+        x0, y0 = np.maximum(np.floor(pred[:2] - margin), 0).astype(int)
+        x1, y1 = np.minimum(np.ceil(pred[2:] + margin), [W, H]).astype(int)
+        best = None
+        if x1 > x0 and y1 > y0:
+            qw = q[y0:y1, x0:x1]
+            for lut in (core, loose):  # the core first; any target colour when no core is found
+                cand, labels = _components(lut[qw] >= self.threshold, (x0, y0))
+                area_ratio = np.prod(cand[:, 2:] - cand[:, :2], axis=1) / max(np.prod(size), 1.0)
+                # Overlap with the predicted box, or (when lost) closeness of centres.
+                centre_d = np.linalg.norm((cand[:, :2] + cand[:, 2:] - pred[:2] - pred[2:]) / 2, axis=1)
+                score = bbox_iou(cand, pred) + (self.n_lost > 0) * 0.5 / (1 + centre_d / max(size))
+                score[(area_ratio < self.min_area_ratio) | (area_ratio > self.max_area_ratio)] = 0
+                if len(score) and score.max() > 0.1:
+                    k = int(np.argmax(score))
+                    best, best_score, fg_mask = cand[k], float(score[k]), labels == k + 1
+                    break
+        if best is None:
+            self.n_lost += 1
+            self.velocity *= 0.8
+            return self.last.copy(), True
+        # Hysteresis: the core's box grows by a pixel onto edge pixels of any target colour.
+        g = np.clip(np.round(best + np.array([-1, -1, 1, 1]) * _GROW_PX).astype(int), 0, [W, H, W, H])
+        ys, xs = np.nonzero(loose[q[g[1] : g[3], g[0] : g[2]]] >= self.threshold)
+        if len(xs):
+            best = np.array([xs.min(), ys.min(), xs.max() + 1, ys.max() + 1], float) + np.tile(g[:2], 2)
+        step = (best[:2] + best[2:] - box[:2] - box[2:]) / 2
+        self.velocity = step if self.n_lost else 0.5 * self.velocity + 0.5 * step
+        self.box, self.n_lost = best, 0
+        self.last = (best / self.scale).astype(np.float32)
+        if self.adapt_rate > 0 and best_score > 0.3:
+            full = np.zeros((H, W), np.uint8)
+            full[y0:y1, x0:x1] = fg_mask
+            fg_new, bg_new = self._model(q, best, full)
+            self.fg = (1 - self.adapt_rate) * fg + self.adapt_rate * fg_new
+            self.bg = (1 - self.adapt_rate) * bg + self.adapt_rate * bg_new
+        return self.last.copy(), False
+
+
+def _check_frame(frame: np.ndarray, name: str) -> np.ndarray:
+    frame = np.asarray(frame)
+    if frame.ndim != 3 or frame.shape[-1] != 3 or frame.dtype != np.uint8:
+        raise ValueError(f"{name} must be (H, W, 3) uint8 RGB, got {frame.shape} {frame.dtype}")
+    return frame
+
+
 def track_bbox(
     frames: np.ndarray,
     first_box: np.ndarray,
@@ -114,80 +224,20 @@ def track_bbox(
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
         raise ValueError(f"frames must be (T, H, W, 3) uint8 RGB, got {frames.shape} {frames.dtype}")
-    b0 = np.clip(np.asarray(first_box, dtype=np.float64).reshape(-1), 0, 1)
-    if b0.shape != (4,) or not (b0[2] > b0[0] and b0[3] > b0[1]):
-        raise ValueError(
-            f"first_box must be a normalised (4,) x0, y0, x1, y1 with x1 > x0, y1 > y0 inside the image, "
-            f"got {first_box!r}"
-        )
-    T, H, W = frames.shape[:3]
-    scale = np.array([W, H, W, H], dtype=np.float64)
-    box = b0 * scale
+    T = frames.shape[0]
     boxes = np.zeros((T, 4), np.float32)
     lost = np.zeros(T, bool)
     if T == 0:
         return TrackResult(boxes, lost)
-    boxes[0] = b0
-
-    def model(q: np.ndarray, b: np.ndarray, fg_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        size = max(b[2] - b[0], b[3] - b[1])
-        ring = _box_mask((H, W), b, grow=max(2 * size, 12)) & (1 - _box_mask((H, W), b, grow=1))
-        return _hist(q, fg_weights), _hist(q, ring)
-
-    q = _quantise(frames[0])
-    # Centre-weighted first model: the target fills the box centre, occluders and neighbours its rim.
-    yy, xx = np.mgrid[0:H, 0:W] + 0.5
-    c, half = (box[:2] + box[2:]) / 2, (box[2:] - box[:2]) / 2
-    kernel = np.exp(
-        -0.5
-        * (((xx - c[0]) / (_KERNEL_SIGMA * half[0])) ** 2 + ((yy - c[1]) / (_KERNEL_SIGMA * half[1])) ** 2)
+    tracker = BoxTracker(
+        frames[0],
+        first_box,
+        threshold=threshold,
+        adapt_rate=adapt_rate,
+        min_area_ratio=min_area_ratio,
+        max_area_ratio=max_area_ratio,
     )
-    fg, bg = model(q, box, kernel * _box_mask((H, W), box))
-    velocity = np.zeros(2)
-    n_lost = 0
+    boxes[0] = tracker.last
     for t in range(1, T):
-        q = _quantise(frames[t])
-        # Any colour likelier on the target than around it; its core: the model's dominant colours
-        # (a finger pad or a neighbour brick in the first box is a minor colour, and left out).
-        loose = fg / (fg + bg + 1e-12)
-        core = np.where(fg >= _CORE_FRACTION * fg.max(), loose, 0.0)
-        size = box[2:] - box[:2]
-        pred = box + np.tile(velocity, 2)
-        margin = (max(size) + 6) * (1 + 0.5 * min(n_lost, 6))  # search wider the longer it is lost
-        x0, y0 = np.maximum(np.floor(pred[:2] - margin), 0).astype(int)
-        x1, y1 = np.minimum(np.ceil(pred[2:] + margin), [W, H]).astype(int)
-        best = None
-        if x1 > x0 and y1 > y0:
-            qw = q[y0:y1, x0:x1]
-            for lut in (core, loose):  # the core first; any target colour when no core is found
-                cand, labels = _components(lut[qw] >= threshold, (x0, y0))
-                area_ratio = np.prod(cand[:, 2:] - cand[:, :2], axis=1) / max(np.prod(size), 1.0)
-                # Overlap with the predicted box, or (when lost) closeness of centres.
-                centre_d = np.linalg.norm((cand[:, :2] + cand[:, 2:] - pred[:2] - pred[2:]) / 2, axis=1)
-                score = bbox_iou(cand, pred) + (n_lost > 0) * 0.5 / (1 + centre_d / max(size))
-                score[(area_ratio < min_area_ratio) | (area_ratio > max_area_ratio)] = 0
-                if len(score) and score.max() > 0.1:
-                    k = int(np.argmax(score))
-                    best, best_score, fg_mask = cand[k], float(score[k]), labels == k + 1
-                    break
-        if best is None:
-            lost[t], boxes[t] = True, boxes[t - 1]
-            n_lost += 1
-            velocity *= 0.8
-            continue
-        # Hysteresis: the core's box grows by a pixel onto edge pixels of any target colour.
-        g = np.clip(np.round(best + np.array([-1, -1, 1, 1]) * _GROW_PX).astype(int), 0, [W, H, W, H])
-        ys, xs = np.nonzero(loose[q[g[1] : g[3], g[0] : g[2]]] >= threshold)
-        if len(xs):
-            best = np.array([xs.min(), ys.min(), xs.max() + 1, ys.max() + 1], float) + np.tile(g[:2], 2)
-        step = (best[:2] + best[2:] - box[:2] - box[2:]) / 2
-        velocity = step if n_lost else 0.5 * velocity + 0.5 * step
-        box, n_lost = best, 0
-        boxes[t] = box / scale
-        if adapt_rate > 0 and best_score > 0.3:
-            full = np.zeros((H, W), np.uint8)
-            full[y0:y1, x0:x1] = fg_mask
-            fg_new, bg_new = model(q, box, full)
-            fg = (1 - adapt_rate) * fg + adapt_rate * fg_new
-            bg = (1 - adapt_rate) * bg + adapt_rate * bg_new
+        boxes[t], lost[t] = tracker.update(frames[t])
     return TrackResult(boxes, lost)

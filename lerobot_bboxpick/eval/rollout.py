@@ -14,6 +14,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from lerobot_bboxpick.eval.bbox_source import BboxSource
+from lerobot_bboxpick.keys import ENV_BBOX
+
 
 @dataclass
 class PolicyRunner:
@@ -78,7 +81,7 @@ class ExpertRunner:
 
     def reset(self) -> None:
         """Plan a pick of the target from the env's just-reset state."""
-        from lerobot_bboxpick.expert import ScriptedExpert
+        from lerobot_bboxpick.sim.expert import ScriptedExpert
 
         self.expert = ScriptedExpert(np.random.default_rng(self.env.episode_seed))
         self.expert.reset(self.env)
@@ -103,25 +106,40 @@ def rollout(
     video_path: Path | None = None,
     env: Any | None = None,
     options: dict | None = None,
+    bbox_source: BboxSource | None = None,
 ) -> dict:
-    """Run one episode; returns outcome, steps and the final gripper-to-target distance."""
+    """Run one episode; returns outcome, steps and the final gripper-to-target distance.
+
+    ``bbox_source`` decides the bbox the policy sees (default: the oracle box); videos draw the
+    oracle box in white and, when they differ, the given box in yellow.
+    """
     from lerobot_bboxpick.sim.env import LegoPickEnv
-    from lerobot_bboxpick.viz import save_mp4
+    from lerobot_bboxpick.viz import draw_bbox, save_mp4
 
     own_env = env is None
     env = env or LegoPickEnv(setting=setting, episode_length=max_steps)
+    source = bbox_source or BboxSource("oracle")
     torch.manual_seed(policy_seed)
     obs, info = env.reset(seed=seed, options=options)
+    obs = source.reset(obs, seed)
     runner.reset()
-    frames = [env.render()] if video_path else []
+
+    def frame() -> np.ndarray:
+        image = env.render()
+        if source.name != "oracle" and obs[ENV_BBOX][2] > obs[ENV_BBOX][0]:
+            draw_bbox(image, obs[ENV_BBOX], color=(255, 220, 0))
+        return image
+
+    frames = [frame()] if video_path else []
     steps = 0
     done = False
     while not done:
         obs, _, terminated, truncated, info = env.step(runner.act(obs, info["task"]))
+        obs = source(obs)
         steps += 1
         done = terminated or truncated
         if video_path:
-            frames.append(env.render())
+            frames.append(frame())
     distance = float(np.linalg.norm(env.tcp_pose()[:3, 3] - env.brick_pose(env.target)[:3, 3]))
     if video_path:
         save_mp4(video_path, frames, env.options.fps)
@@ -134,6 +152,9 @@ def rollout(
         "steps": steps,
         "final_distance_m": distance,
         "sim_unstable": bool(info.get("sim_unstable", False)),
+        "bbox_source": source.name,
+        "bbox_mean_iou": None if source.mean_iou is None else round(source.mean_iou, 4),
+        "bbox_lost_frames": source.lost_frames,
     }
     if own_env:
         env.close()

@@ -4,11 +4,17 @@
         --settings=grid_id,identical_4 --episodes=30 --workers=2 --out_dir=outputs/suite
 
 Every policy meets the same scenes: episode ``k`` of a setting resets the env with seed
-``seed_start + k`` (held-out seeds >= 10000 by default; collection uses seeds from 0), and the policy's
-own noise is seeded from the same number, so re-running a suite reproduces its scenes and, for a
-deterministic policy, its outcomes. Episodes run in worker processes (each loads a policy once and
-keeps one env per setting); results stream into ``episodes.jsonl`` as they finish, so an interrupted
-suite resumes where it stopped. Written into ``out_dir``:
+``seed_start + k`` (test seeds >= 10000 by default, ``lerobot_bboxpick.seeds``; validation seeds
+5000-9999 for choosing recipes; a suite on training seeds is warned about), and the policy's own noise
+is seeded from the same number, so re-running a suite reproduces its scenes and, for a deterministic
+policy, its outcomes. ``--bbox_source`` decides the box the policy sees: ``oracle`` (the simulator's),
+``noisy`` (a person's, IoU ``--noisy_iou`` to the oracle box) or ``tracked`` (the first frame's box,
+then the tracker). Episodes run in worker processes (each loads a policy once and keeps one env per
+setting); results stream into ``episodes.jsonl`` as they finish, so an interrupted suite resumes where it
+stopped. Every episode carries the run key of its policy: a digest of the checkpoint's weights and the
+options that change behaviour (executed steps per chunk, max steps, bbox source); a re-run whose key
+differs from the episodes already in ``out_dir`` is refused (``--fresh=true`` moves them aside and starts
+over), so a table never mixes checkpoints. Written into ``out_dir``:
 
 * ``episodes.jsonl``: one line per episode (policy, setting, seed, scene, target, outcome, steps, distance)
 * ``table.md`` / ``table.csv``: Pick / Wrong / Contact / Empty per policy and setting, Wilson 95% intervals
@@ -31,8 +37,11 @@ import draccus
 import numpy as np
 from tqdm import tqdm
 
+from lerobot_bboxpick import seeds
+from lerobot_bboxpick.eval.bbox_source import DEFAULT_NOISY_IOU, check_bbox_source
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 from lerobot_bboxpick.sim.outcome import OUTCOMES
+from lerobot_bboxpick.viz import outcome_bars
 
 EXPERT = "expert"
 log = logging.getLogger(__name__)
@@ -47,16 +56,24 @@ class SuiteConfig:
     policies: str = EXPERT
     settings: str = ",".join(SETTINGS)
     episodes: int = 30
-    seed_start: int = 10000
+    # First episode seed: test seeds (10000+) for reported tables, validation seeds (5000-9999) for
+    # choosing a recipe.
+    seed_start: int = seeds.TEST_START
     workers: int = 2
     # Rollout videos kept per policy and setting (the first seeds).
     videos: int = 2
     max_steps: int = 300
     # Executed steps per predicted chunk; None keeps each checkpoint's own setting.
     n_action_steps: int | None = None
+    # The bbox the policy sees: oracle, noisy or tracked (see the module docstring).
+    bbox_source: str = "oracle"
+    # Target IoU of the noisy bbox with the oracle one.
+    noisy_iou: float = DEFAULT_NOISY_IOU
     out_dir: Path = Path("outputs/suite")
-    # Keep episodes already in out_dir/episodes.jsonl (same policy label, setting and seed).
+    # Keep episodes already in out_dir/episodes.jsonl (same policy label, setting, seed and run key).
     resume: bool = True
+    # Move episodes of another run key (other weights or options) aside instead of refusing to run.
+    fresh: bool = False
 
     def __post_init__(self) -> None:
         self.out_dir = Path(self.out_dir)
@@ -64,6 +81,11 @@ class SuiteConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+        check_bbox_source(self.bbox_source)
+        if not 0.0 < self.noisy_iou <= 1.0:
+            raise ValueError(f"noisy_iou={self.noisy_iou!r} must be in (0, 1]")
+        if not isinstance(self.seed_start, int) or self.seed_start < 0:
+            raise ValueError(f"seed_start={self.seed_start!r} must be an integer >= 0")
         if not self.setting_list:
             raise ValueError(f"settings={self.settings!r} is empty; valid settings: {', '.join(SETTINGS)}")
         labels = [label for label, _ in self.policy_list]
@@ -90,6 +112,33 @@ class SuiteConfig:
             label, _, path = entry.rpartition("=") if "=" in entry else ("", "", entry)
             out.append((label or policy_label(path), path))
         return out
+
+
+def weights_digest(path: str) -> str:
+    """sha256 (16 hex digits) of a checkpoint's weight files, or ``"expert"``."""
+    if path == EXPERT:
+        return EXPERT
+    digest = hashlib.sha256()
+    files = sorted(Path(path).glob("*.safetensors"))
+    if not files:
+        raise ValueError(f"policies: {path} holds no *.safetensors weights")
+    for file in files:
+        with open(file, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+def run_key(cfg: SuiteConfig, path: str) -> dict:
+    """What decides a policy's episodes: its weights and the options that change its behaviour."""
+    key: dict[str, Any] = {"weights": weights_digest(path), "max_steps": cfg.max_steps}
+    key["bbox_source"] = cfg.bbox_source
+    if cfg.bbox_source == "noisy":
+        key["noisy_iou"] = cfg.noisy_iou
+    if path != EXPERT:
+        own = json.loads((Path(path) / "config.json").read_text()).get("n_action_steps")
+        key["n_action_steps"] = cfg.n_action_steps if cfg.n_action_steps is not None else own
+    return key
 
 
 def policy_label(path: str) -> str:
@@ -155,15 +204,27 @@ def run_episode(task: dict) -> dict:
     from lerobot_bboxpick.eval.rollout import rollout
 
     torch.set_num_threads(task.get("threads", 1))
+    from lerobot_bboxpick.eval.bbox_source import BboxSource
+
     env = _env(task["setting"], task["max_steps"])
     runner = _runner(task["path"], task.get("n_action_steps"), env)
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
+    source = BboxSource(task["run_key"]["bbox_source"], task["run_key"].get("noisy_iou", DEFAULT_NOISY_IOU))
     t0 = time.perf_counter()
-    result = rollout(runner, setting=task["setting"], seed=seed, policy_seed=seed, video_path=video, env=env)
+    result = rollout(
+        runner,
+        setting=task["setting"],
+        seed=seed,
+        policy_seed=seed,
+        video_path=video,
+        env=env,
+        bbox_source=source,
+    )
     return {
         "policy": task["label"],
         "path": task["path"],
+        "run_key": task["run_key"],
         "scene": scene_fingerprint(env.layout),
         **result,
         "seconds": round(time.perf_counter() - t0, 2),  # wall time in the worker (video writing included)
@@ -171,7 +232,7 @@ def run_episode(task: dict) -> dict:
 
 
 # ---------------------------------------------------------------- parent side
-def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]]) -> list[dict]:
+def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, dict]) -> list[dict]:
     threads = max(1, (mp.cpu_count() or 1) // cfg.workers)
     tasks = []
     for label, path in cfg.policy_list:
@@ -189,6 +250,7 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]]) -> list[dict]:
                         "seed": seed,
                         "max_steps": cfg.max_steps,
                         "n_action_steps": cfg.n_action_steps,
+                        "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
                         "threads": threads,
                     }
@@ -219,14 +281,31 @@ def run_suite(cfg: SuiteConfig) -> Path:
         for s in cfg.setting_list
         for k in range(cfg.episodes)
     }
-    previous = read_episodes(jsonl) if cfg.resume else []
+    seeds.warn_unless_held_out(cfg.seed_start, cfg.seed_start + cfg.episodes - 1, "bboxpick-suite")
+    keys = {label: run_key(cfg, path) for label, path in cfg.policy_list}
+    previous = read_episodes(jsonl)
+    stale = [r for r in previous if r.get("policy") in keys and r.get("run_key") != keys[r["policy"]]]
+    if stale and not cfg.fresh:
+        old = stale[0]
+        raise ValueError(
+            f"out_dir={cfg.out_dir} holds {len(stale)} episodes of policy {old['policy']!r} run as "
+            f"{old.get('run_key', '(no run key: an older suite)')}, but this run is {keys[old['policy']]}: "
+            "a table would mix them. Choose another --out_dir, another label (label=path), or pass "
+            "--fresh=true to move the old episodes aside and start over"
+        )
+    if stale or (previous and not cfg.resume):
+        aside = jsonl.with_name(f"episodes.{time.strftime('%Y%m%d-%H%M%S')}.jsonl")
+        jsonl.rename(aside)  # never deleted: a person may want the old run
+        log.warning("moved %d earlier episodes aside to %s", len(previous), aside)
+        previous = []
     kept = [r for r in previous if (r.get("policy"), r.get("setting"), r.get("seed")) in wanted]
     done = {(r["policy"], r["setting"], r["seed"]) for r in kept}
     if kept:
         log.info("resuming: %d of %d episodes already in %s", len(kept), len(wanted), jsonl)
-    # Rewrite the file with only the episodes of this suite, then append as episodes finish.
-    jsonl.write_text("".join(json.dumps(r) + "\n" for r in kept))
-    tasks = _tasks(cfg, done)
+    # Rewrite the file (dropping a torn last line; every other record stays, also those this suite does
+    # not report), then append as episodes finish.
+    jsonl.write_text("".join(json.dumps(r) + "\n" for r in previous))
+    tasks = _tasks(cfg, done, keys)
     records = list(kept)
     with open(jsonl, "a") as sink, tqdm(total=len(wanted), initial=len(kept), desc="suite", unit="ep") as bar:
 
@@ -246,7 +325,12 @@ def run_suite(cfg: SuiteConfig) -> Path:
             with mp.get_context("spawn").Pool(cfg.workers, maxtasksperchild=None) as pool:
                 for result in pool.imap_unordered(run_episode, tasks, chunksize=1):
                     record(result)
-    return write_report(records, cfg.out_dir, [label for label, _ in cfg.policy_list], cfg.setting_list)
+    source = cfg.bbox_source + (
+        f" (IoU {cfg.noisy_iou:g} to the oracle box)" if cfg.bbox_source == "noisy" else ""
+    )
+    return write_report(
+        records, cfg.out_dir, [label for label, _ in cfg.policy_list], cfg.setting_list, bbox_source=source
+    )
 
 
 def summarize(records: list[dict], policies: list[str], settings: tuple[str, ...]) -> list[dict]:
@@ -266,6 +350,8 @@ def summarize(records: list[dict], policies: list[str], settings: tuple[str, ...
                 row[f"{outcome}_ci_high"] = round(high, 4)
             # Episodes whose simulation blew up (env info "sim_unstable"): kept in the counts, flagged here.
             row["sim_unstable"] = sum(bool(r.get("sim_unstable", False)) for r in group)
+            ious = [r["bbox_mean_iou"] for r in group if r.get("bbox_mean_iou") is not None]
+            row["mean_bbox_iou"] = round(float(np.mean(ious)), 4) if ious else None
             distances = [r["final_distance_m"] for r in group]
             row["mean_final_distance_m"] = round(float(np.mean(distances)), 4) if n else None
             rows.append(row)
@@ -286,53 +372,25 @@ def markdown_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def bar_chart(rows: list[dict], path: Path) -> Path:
-    """Grouped bars: one panel per outcome, settings on the x axis, one bar per policy, Wilson error bars."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    policies = list(dict.fromkeys(r["policy"] for r in rows))
-    settings = list(dict.fromkeys(r["setting"] for r in rows))
-    fig, axes = plt.subplots(1, len(OUTCOMES), figsize=(4 * len(OUTCOMES), 3.6), sharey=True)
-    width = 0.8 / len(policies)
-    x = np.arange(len(settings))
-    for ax, outcome in zip(axes, OUTCOMES, strict=True):
-        for i, policy in enumerate(policies):
-            sel = [next(r for r in rows if r["policy"] == policy and r["setting"] == s) for s in settings]
-            rate = np.array([100 * r[f"{outcome}_rate"] for r in sel])
-            err = np.array(
-                [
-                    [rate[j] - 100 * r[f"{outcome}_ci_low"], 100 * r[f"{outcome}_ci_high"] - rate[j]]
-                    for j, r in enumerate(sel)
-                ]
-            ).T
-            ax.bar(x + (i - (len(policies) - 1) / 2) * width, rate, width, yerr=err, capsize=2, label=policy)
-        ax.set_title(outcome.capitalize())
-        ax.set_xticks(x, settings, rotation=35, ha="right", fontsize=8)
-        ax.set_ylim(0, 105)
-        ax.grid(axis="y", alpha=0.3)
-    axes[0].set_ylabel("% of episodes (Wilson 95% CI)")
-    axes[-1].legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
-
-
-def write_report(records: list[dict], out_dir: Path, policies: list[str], settings: tuple[str, ...]) -> Path:
+def write_report(
+    records: list[dict],
+    out_dir: Path,
+    policies: list[str],
+    settings: tuple[str, ...],
+    bbox_source: str = "oracle",
+) -> Path:
     """table.md, table.csv and outcomes.png from the episode records; returns table.md."""
     rows = summarize(records, policies, settings)
     with open(out_dir / "table.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    bar_chart(rows, out_dir / "outcomes.png")
-    seeds = sorted({r["seed"] for r in records})
+    outcome_bars(rows, OUTCOMES, out_dir / "outcomes.png")
+    used = sorted({r["seed"] for r in records})
+    split_names = " + ".join(dict.fromkeys(seeds.split_of(x) for x in used)) + " seeds"
     header = (
-        f"Outcomes per policy and setting over the same scenes (seeds {seeds[0]}-{seeds[-1]}); "
-        "brackets: Wilson 95% interval.\n\n"
+        f"Outcomes per policy and setting over the same scenes (seeds {used[0]}-{used[-1]}, "
+        f"{split_names}); bbox source: {bbox_source}; brackets: Wilson 95% interval.\n\n"
     )
     unstable = [f"{r['policy']}/{r['setting']}: {r['sim_unstable']}" for r in rows if r["sim_unstable"]]
     footer = ""

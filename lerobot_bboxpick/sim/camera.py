@@ -18,6 +18,8 @@ import cv2
 import mujoco
 import numpy as np
 
+from lerobot_bboxpick.sim.scene import lookup
+
 
 @dataclass(frozen=True)
 class FisheyeLens:
@@ -177,7 +179,7 @@ class WristCamera:
         fovy_deg: float = 140.0,
         segmentation_supersample: int = 3,
     ) -> None:
-        model.cam_fovy[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)] = fovy_deg
+        model.cam_fovy[lookup(model, "camera", camera)] = fovy_deg
         self.camera = camera
         self.camera_site = camera_site
         self.lens = lens

@@ -11,11 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import mink
-import mujoco
 import numpy as np
 
 from lerobot_bboxpick import geometry
-from lerobot_bboxpick.sim.scene import ARM_JOINTS, build_robot_model
+from lerobot_bboxpick.sim.scene import ARM_JOINTS, build_robot_model, lookup
 
 # TCP position limits in the table frame (m): above the table, inside the reach we train and test in.
 WORKSPACE_LOW = np.array([0.15, -0.50, 0.0])
@@ -72,12 +71,7 @@ class TcpIkController:
     ) -> None:
         self.model = build_robot_model()
         self.configuration = mink.Configuration(self.model)
-        self._arm_q = np.array(
-            [
-                self.model.jnt_qposadr[mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, n)]
-                for n in ARM_JOINTS
-            ]
-        )
+        self._arm_q = np.array([self.model.jnt_qposadr[lookup(self.model, "joint", n)] for n in ARM_JOINTS])
         self.tcp_task = mink.FrameTask(
             "tcp", "site", position_cost=1.0, orientation_cost=0.5, lm_damping=1e-3
         )

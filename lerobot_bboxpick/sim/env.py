@@ -12,13 +12,13 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
-import cv2
 import gymnasium as gym
 import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lerobot_bboxpick import geometry
+from lerobot_bboxpick.keys import ENV_BBOX, ENV_CAMERA, ENV_PIXELS, ENV_STATE
 from lerobot_bboxpick.sim.camera import LENSES, BoxProjection, WristCamera
 from lerobot_bboxpick.sim.controller import (
     WORKSPACE_HIGH,
@@ -27,7 +27,7 @@ from lerobot_bboxpick.sim.controller import (
     TcpIkController,
     limit_step,
 )
-from lerobot_bboxpick.sim.layouts import Layout, check_setting, describe_target, make_layout
+from lerobot_bboxpick.sim.layouts import Layout, check_setting, describe_target, make_layout, scene_rng
 from lerobot_bboxpick.sim.outcome import OutcomeTracker
 from lerobot_bboxpick.sim.randomization import Randomizer
 from lerobot_bboxpick.sim.scene import (
@@ -38,6 +38,7 @@ from lerobot_bboxpick.sim.scene import (
     brick_silhouette_points,
     build_model,
 )
+from lerobot_bboxpick.viz import draw_bbox
 
 ACTION_DIM = 10
 IMAGE_SIZE = 224
@@ -143,11 +144,11 @@ class LegoPickEnv(gym.Env):
 
         self.observation_space = gym.spaces.Dict(
             {
-                "pixels": gym.spaces.Dict(
-                    {"wrist": gym.spaces.Box(0, 255, (IMAGE_SIZE, IMAGE_SIZE, 3), dtype=np.uint8)}
+                ENV_PIXELS: gym.spaces.Dict(
+                    {ENV_CAMERA: gym.spaces.Box(0, 255, (IMAGE_SIZE, IMAGE_SIZE, 3), dtype=np.uint8)}
                 ),
-                "agent_pos": gym.spaces.Box(-np.inf, np.inf, (ACTION_DIM,), dtype=np.float32),
-                "bbox": gym.spaces.Box(0.0, 1.0, (4,), dtype=np.float32),
+                ENV_STATE: gym.spaces.Box(-np.inf, np.inf, (ACTION_DIM,), dtype=np.float32),
+                ENV_BBOX: gym.spaces.Box(0.0, 1.0, (4,), dtype=np.float32),
             }
         )
         low = np.concatenate([WORKSPACE_LOW, -np.ones(6), [0.0]]).astype(np.float32)
@@ -224,7 +225,7 @@ class LegoPickEnv(gym.Env):
         if seed is None:
             seed = int(self.np_random.integers(0, 2**31 - 1))
         self.episode_seed = seed
-        rng = np.random.default_rng(seed)
+        rng = scene_rng(self.options.setting, seed)
         layout = options.get("layout") or make_layout(self.options.setting, rng)
         if "target" in options:
             target = int(options["target"])
@@ -267,7 +268,8 @@ class LegoPickEnv(gym.Env):
         mujoco.mj_step(self.model, self.data, nstep=round(SETTLE_SECONDS / self.model.opt.timestep))
         mujoco.mj_forward(self.model, self.data)
 
-        self._tracker = OutcomeTracker(self.ids, layout.target)
+        # Resting heights after the settle: a stacked brick is lifted from where it lies, not from the table.
+        self._tracker = OutcomeTracker(self.ids, layout.target, self.data.xpos[self.ids.brick_bodies, 2])
         self._steps = 0
         self.task_description = describe_target(layout)
         self.task = self.task_description
@@ -297,6 +299,7 @@ class LegoPickEnv(gym.Env):
             self._write_ctrl(q_from + a * (ik.q_arm - q_from), w_from + a * (width - w_from))
             mujoco.mj_step(self.model, self.data, nstep=nstep)
             self._tracker.update(self.data)
+        self._tracker.end_step(self.data)
         self._q_cmd, self._width_cmd, self._T_cmd = ik.q_arm, width, T
         self._steps += 1
         obs = self._observe()
@@ -345,7 +348,7 @@ class LegoPickEnv(gym.Env):
         image = self.camera.render(self.data)
         box = self.brick_box(self.target)
         self._last_image, self._last_box = image, box
-        return {"pixels": {"wrist": image}, "agent_pos": self.agent_pos(), "bbox": box.bbox.copy()}
+        return {ENV_PIXELS: {ENV_CAMERA: image}, ENV_STATE: self.agent_pos(), ENV_BBOX: box.bbox.copy()}
 
     def _info(
         self, ik: IkResult | None, width_clamped: bool = False, speed_limited: bool = False
@@ -367,13 +370,3 @@ class LegoPickEnv(gym.Env):
             "speed_limited": speed_limited,
             "sim_unstable": self._tracker.unstable,
         }
-
-
-def draw_bbox(
-    image: np.ndarray, bbox: np.ndarray, color: tuple[int, int, int] = (255, 255, 255)
-) -> np.ndarray:
-    """Draw a normalised bbox on an RGB image in place (and return it)."""
-    h, w = image.shape[:2]
-    x0, y0, x1, y1 = (np.asarray(bbox) * [w, h, w, h]).round().astype(int)
-    cv2.rectangle(image, (int(x0), int(y0)), (int(x1) - 1, int(y1) - 1), color, 1)
-    return image

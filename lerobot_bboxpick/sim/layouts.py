@@ -1,6 +1,7 @@
 """The six scene settings: where the twelve bricks go, which colours they have, which one is the target.
 
-Every layout is a pure function of the setting and a numpy Generator, so one seed is one scene.
+Every layout is a pure function of the setting and a numpy Generator; ``scene_rng(setting, seed)``
+gives the Generator of one seed, so one (setting, seed) is one scene.
 Positions are the centre of each brick's bottom face in the table frame (+x away from the robot,
 +y to the robot's left).
 """
@@ -46,6 +47,15 @@ def check_setting(setting: str) -> str:
             f"setting={setting!r} is not a lego_pick setting; valid settings: {', '.join(SETTINGS)}"
         )
     return setting
+
+
+def scene_rng(setting: str, seed: int) -> np.random.Generator:
+    """The random stream of scene ``seed`` of ``setting`` (layout, then appearance and start pose).
+
+    Each setting has a stream of its own, so the same seed gives different scenes in different settings
+    (grid_id and the identical settings share the grid slots, never the draw).
+    """
+    return np.random.default_rng([SETTINGS.index(check_setting(setting)), int(seed)])
 
 
 def _grid(

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from lerobot_bboxpick.sim.scene import BRICK_COLORS, SceneIds
+from lerobot_bboxpick.sim.scene import BRICK_COLORS, SceneIds, lookup
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,7 @@ class Randomizer:
         self.model = model
         self.ids = ids
         self.enabled = enabled
-        self._light = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_LIGHT, "key")
+        self._light = lookup(model, "light", "key")
         self._table_mat = model.geom_matid[ids.table_geom]
         self._nominal_dir = model.light_dir[self._light].copy()
         self._nominal_diffuse = float(model.light_diffuse[self._light][0])

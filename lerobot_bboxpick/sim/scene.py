@@ -130,6 +130,26 @@ def brick_silhouette_points() -> np.ndarray:
     return np.concatenate(edges + rims, axis=0)
 
 
+def lookup(model: mujoco.MjModel, kind: str, name: str) -> int:
+    """Index of the ``kind`` (joint, body, geom, site, camera, actuator, light) called ``name``.
+
+    Raises a KeyError listing the valid names instead of returning MuJoCo's -1, which would silently
+    index the last element of every array it is used on.
+    """
+    objtype = getattr(mujoco.mjtObj, f"mjOBJ_{kind.upper()}", None)
+    if objtype is None:
+        raise ValueError(f"kind={kind!r} is not a MuJoCo object type (joint, body, geom, site, camera, ...)")
+    index = mujoco.mj_name2id(model, objtype, name)
+    if index < 0:
+        count = {"light": model.nlight, "camera": model.ncam, "actuator": model.nu}.get(kind)
+        count = count if count is not None else getattr(model, f"n{kind}")
+        names = [mujoco.mj_id2name(model, objtype, i) for i in range(count)]
+        raise KeyError(
+            f"the model has no {kind} named {name!r}; its {kind}s: {', '.join(n for n in names if n)}"
+        )
+    return index
+
+
 @dataclass(frozen=True)
 class SceneIds:
     """Indices into a compiled lego_pick model."""
@@ -158,16 +178,16 @@ class SceneIds:
         """Look up every index once."""
 
         def jid(name: str) -> int:
-            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+            return lookup(model, "joint", name)
 
         def bid(name: str) -> int:
-            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+            return lookup(model, "body", name)
 
         def gid(name: str) -> int:
-            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+            return lookup(model, "geom", name)
 
         def aid(name: str) -> int:
-            return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+            return lookup(model, "actuator", name)
 
         arm_j = [jid(n) for n in ARM_JOINTS]
         bricks = np.array([bid(f"brick_{i}") for i in range(N_BRICKS)])
@@ -200,9 +220,9 @@ class SceneIds:
             gripper_geoms=geoms_of_subtree("gripper"),
             pad_geoms=np.array([gid("finger_left_pad"), gid("finger_right_pad")]),
             finger_geoms=(geoms_of_subtree("finger_left"), geoms_of_subtree("finger_right")),
-            tcp_site=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tcp"),
-            camera_site=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "camera"),
-            camera=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, WRIST_CAMERA),
+            tcp_site=lookup(model, "site", "tcp"),
+            camera_site=lookup(model, "site", "camera"),
+            camera=lookup(model, "camera", WRIST_CAMERA),
             table_geom=gid("table"),
             table_top_geom=gid("table_top"),
         )

@@ -1,12 +1,13 @@
-"""Configuration of the ``bbox_diffusion`` policy (``lerobot-train --policy.type=bbox_diffusion``).
+"""Configuration of the ``bbox_diffusion`` policies (``lerobot-train --policy.type=bbox_diffusion``).
 
 A UMI-style diffusion policy (FACTS.md section 2) whose target bounding box enters as a mask
-channel beside the wrist image (paper section 4.1). Presets pick the vision backbone and sizes:
+channel beside the wrist image (paper section 4.1). Two registered types, each with its real defaults
+in the dataclass (and so in ``--help``):
 
-* ``paper``: CLIP ViT-L/14 at 224 px with pretrained weights, UMI's UNet (256, 512, 1024).
-* ``cpu``: a small backbone at a small input size that trains on a 2-core CPU (figures in the README).
-
-Any field left ``None`` takes the preset's value; set it to override.
+* ``bbox_diffusion``: the CPU design, a from-scratch ResNet-18 (stage 2, 32 spatial-softmax keypoints)
+  at 96 px, a small UNet, x0 prediction; trains on a 2-core CPU (docs/results.md).
+* ``bbox_diffusion_paper``: the paper's design, CLIP ViT-L/14 at 224 px with pretrained weights, CLS
+  feature, UMI's UNet (256, 512, 1024), epsilon prediction.
 """
 
 from dataclasses import dataclass, field
@@ -14,60 +15,9 @@ from dataclasses import dataclass, field
 from lerobot.configs import NormalizationMode, PreTrainedConfig
 from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
 
+from lerobot_bboxpick.keys import BBOX
+
 BBOX_MODES = ("mask", "lowdim", "none")
-PRESETS: dict[str, dict] = {
-    "paper": {
-        "backbone": "vit_large_patch14_clip_224.openai",
-        "pretrained_backbone": True,
-        "image_size": 224,
-        "pooling": "default",
-        "feature_stage": 2,
-        "group_norm": False,
-        "prediction_type": "epsilon",
-        "down_dims": (256, 512, 1024),
-        "diffusion_step_embed_dim": 128,
-        "encoder_lr_scale": 0.1,
-        "scheduler_warmup_steps": 2000,
-        "n_action_steps": 8,
-        "mask_centroid": False,
-    },
-    # ResNet-18 cut after stage 2 (stride 8: a 12x12 map at 96 px) + spatial-softmax keypoints, GroupNorm,
-    # from scratch, x0 prediction: see the README's canary section for why this replaced cpu_vit.
-    # 12 executed steps per chunk and the mask centroid are what the 90-minute recipe measured best
-    # (README, "A policy trained on this machine").
-    "cpu": {
-        "backbone": "resnet18",
-        "pretrained_backbone": False,
-        "image_size": 96,
-        "pooling": "spatial_softmax",
-        "feature_stage": 2,
-        "group_norm": True,
-        "prediction_type": "sample",
-        "down_dims": (64, 128, 256),
-        "diffusion_step_embed_dim": 64,
-        "encoder_lr_scale": 1.0,
-        "scheduler_warmup_steps": 200,
-        "n_action_steps": 12,
-        "mask_centroid": True,
-    },
-    # vit_tiny at 96 px (6x6 patches, CLS feature): UMI's design at CPU size; as fast as the smallest
-    # ResNets here (~65 samples/s encoder fwd+bwd on 2 cores) but too coarse to localise a brick.
-    "cpu_vit": {
-        "backbone": "vit_tiny_patch16_224",
-        "pretrained_backbone": False,
-        "image_size": 96,
-        "pooling": "default",
-        "feature_stage": 2,
-        "group_norm": False,
-        "prediction_type": "epsilon",
-        "down_dims": (64, 128, 256),
-        "diffusion_step_embed_dim": 64,
-        "encoder_lr_scale": 1.0,
-        "scheduler_warmup_steps": 200,
-        "n_action_steps": 8,
-        "mask_centroid": False,
-    },
-}
 
 
 @PreTrainedConfig.register_subclass("bbox_diffusion")
@@ -76,10 +26,11 @@ class BboxDiffusionConfig(PreTrainedConfig):
     """Options of the bbox-conditioned diffusion policy."""
 
     # Observation and action horizons (UMI): 2 observed steps, a 16-step chunk starting at the current
-    # step, of which n_action_steps (preset: 12 for cpu, 8 otherwise) are executed before predicting again.
+    # step, of which n_action_steps are executed before predicting again (12 of 16 re-checked on
+    # validation seeds for the CPU recipe, docs/results.md; the paper type executes 8).
     n_obs_steps: int = 2
     horizon: int = 16
-    n_action_steps: int | None = None
+    n_action_steps: int = 12
 
     # How the target bbox enters: "mask" (4th image channel, the paper's method), "lowdim" (the four
     # numbers join the low-dimensional conditioning, paper Exp. 6), "none" (no target prompt, Exp. 1).
@@ -88,28 +39,28 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # per frame) to the low-dim conditioning. Unlike the raw bbox (paper Exp. 6) they are measured after
     # the random crop, so they stay consistent with the pixels; they hand a from-scratch encoder the
     # target's image position directly instead of making it find the mask through the CNN.
-    # Preset: on for cpu, off for paper/cpu_vit; the preset's value applies only with bbox_mode="mask".
-    mask_centroid: bool | None = None
-    preset: str = "cpu"
-    backbone: str | None = None
-    pretrained_backbone: bool | None = None
-    image_size: int | None = None
+    # Only used with bbox_mode="mask": the ablation modes have no mask, so it is turned off for them.
+    mask_centroid: bool = True
+    # timm backbone by name; pretrained weights are loaded by timm (fails clearly when they cannot be).
+    backbone: str = "resnet18"
+    pretrained_backbone: bool = False
+    image_size: int = 96
     # "default": timm's pooled feature (CLS token for ViTs, as UMI); "spatial_softmax": a CNN cut after
     # timm stage ``feature_stage`` whose map becomes ``num_keypoints`` (x, y) keypoints.
-    pooling: str | None = None
-    feature_stage: int | None = None
+    pooling: str = "spatial_softmax"
+    feature_stage: int = 2
     num_keypoints: int = 32
     # GroupNorm instead of BatchNorm in CNN backbones trained from scratch.
-    group_norm: bool | None = None
+    group_norm: bool = True
     crop_ratio: float = 0.95
     # ColorJitter (brightness, contrast, saturation, hue), UMI's values.
     color_jitter: tuple[float, float, float, float] = (0.3, 0.4, 0.5, 0.08)
 
     # UNet (LeRobot's DiffusionConditionalUnet1d).
-    down_dims: tuple[int, ...] | None = None
+    down_dims: tuple[int, ...] = (64, 128, 256)
     kernel_size: int = 5
     n_groups: int = 8
-    diffusion_step_embed_dim: int | None = None
+    diffusion_step_embed_dim: int = 64
     use_film_scale_modulation: bool = True
     gradient_checkpointing: bool = False
     # Run the UNet's 16 denoising calls per chunk through a TorchScript trace at inference (eval mode,
@@ -127,7 +78,7 @@ class BboxDiffusionConfig(PreTrainedConfig):
     beta_schedule: str = "squaredcos_cap_v2"
     beta_start: float = 0.0001
     beta_end: float = 0.02
-    prediction_type: str | None = None
+    prediction_type: str = "sample"
     clip_sample: bool = True
     clip_sample_range: float = 1.0
     input_perturbation: float = 0.1
@@ -146,9 +97,9 @@ class BboxDiffusionConfig(PreTrainedConfig):
     optimizer_eps: float = 1e-8
     optimizer_weight_decay: float = 1e-6
     optimizer_grad_clip_norm: float = 10.0
-    encoder_lr_scale: float | None = None
+    encoder_lr_scale: float = 1.0
     scheduler_name: str = "cosine"
-    scheduler_warmup_steps: int | None = None
+    scheduler_warmup_steps: int = 200
     # EMA of the weights (UMI: power 0.75, max decay 0.9999), updated by ``update()`` after each step.
     use_ema: bool = True
     ema_power: float = 0.75
@@ -170,15 +121,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
         super().__post_init__()
         if self.bbox_mode not in BBOX_MODES:
             raise ValueError(f"bbox_mode={self.bbox_mode!r} is not one of {', '.join(BBOX_MODES)}")
-        if self.preset not in PRESETS:
-            raise ValueError(f"preset={self.preset!r} is not one of {', '.join(PRESETS)}")
-        if self.mask_centroid and self.bbox_mode != "mask":
-            raise ValueError(f"mask_centroid=true needs bbox_mode='mask', got bbox_mode={self.bbox_mode!r}")
-        if self.mask_centroid is None and self.bbox_mode != "mask":
-            self.mask_centroid = False  # the ablations get no centroid, whatever the preset says
-        for key, value in PRESETS[self.preset].items():
-            if getattr(self, key) is None:
-                setattr(self, key, value)
+        if self.bbox_mode != "mask":
+            self.mask_centroid = False  # no mask to measure (see the field)
+        if self.pooling not in ("default", "spatial_softmax"):
+            raise ValueError(f"pooling={self.pooling!r} must be 'default' or 'spatial_softmax'")
         self.down_dims = tuple(self.down_dims)
         if not 1 <= self.n_action_steps <= self.horizon:
             raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon={self.horizon}]")
@@ -216,7 +162,7 @@ class BboxDiffusionConfig(PreTrainedConfig):
     @property
     def bbox_feature_key(self) -> str:
         """Name of the bbox observation."""
-        return "observation.bbox"
+        return BBOX
 
     @property
     def image_key(self) -> str:
@@ -237,3 +183,23 @@ class BboxDiffusionConfig(PreTrainedConfig):
     def reward_delta_indices(self) -> None:
         """No rewards."""
         return None
+
+
+@PreTrainedConfig.register_subclass("bbox_diffusion_paper")
+@dataclass
+class BboxDiffusionPaperConfig(BboxDiffusionConfig):
+    """The paper's design (section 4.1, UMI's recipe): CLIP ViT-L/14 at 224 px with pretrained weights,
+    its CLS token as the image feature, UMI's UNet, epsilon prediction, 8 executed steps per chunk."""
+
+    n_action_steps: int = 8
+    mask_centroid: bool = False
+    backbone: str = "vit_large_patch14_clip_224.openai"
+    pretrained_backbone: bool = True
+    image_size: int = 224
+    pooling: str = "default"
+    group_norm: bool = False
+    down_dims: tuple[int, ...] = (256, 512, 1024)
+    diffusion_step_embed_dim: int = 128
+    prediction_type: str = "epsilon"
+    encoder_lr_scale: float = 0.1
+    scheduler_warmup_steps: int = 2000

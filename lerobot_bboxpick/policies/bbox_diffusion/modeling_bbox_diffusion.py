@@ -6,7 +6,8 @@ Data flow for one prediction (paper figure 5):
   observed TCP poses -> relative to the latest one (SE(3)) -> scaled low-dim vector
   [features, low-dim] of every observed step -> global condition (computed once per chunk)
   -> 16 DDIM steps of LeRobot's conditional 1-D UNet -> relative action chunk (pose10)
-The preprocessor made the training targets relative; the postprocessor makes predictions absolute.
+  -> composed with the latest observed pose -> absolute action chunk
+The policy takes and returns absolute poses; the relative form (UMI) exists only inside the model.
 """
 
 import warnings
@@ -22,16 +23,16 @@ from lerobot.policies.utils import populate_queues
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.geometry import absolute_pose10_torch, relative_pose10_torch
+from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
+    BboxDiffusionConfig,
+    BboxDiffusionPaperConfig,
+)
 from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     MaskedImageEncoder,
     PairedAugment,
     bbox_to_mask,
     mask_moments,
-)
-from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import (
-    absolute_pose10_torch,
-    relative_pose10_torch,
 )
 
 
@@ -133,9 +134,13 @@ class BboxDiffusionModel(nn.Module):
         return images, states, bboxes
 
     def compute_loss(self, batch: dict[str, Tensor]) -> Tensor:
-        """Epsilon-prediction loss with UMI's input perturbation; ``batch[ACTION]`` is already relative."""
-        cond = self.global_condition(*self._inputs(batch))
-        trajectory = self.action_scaler(batch[ACTION])
+        """Denoising loss with UMI's input perturbation on the chunk ``batch[ACTION]`` (absolute poses),
+        made relative to the latest observed pose first."""
+        images, states, bboxes = self._inputs(batch)
+        cond = self.global_condition(images, states, bboxes)
+        with torch.autocast(states.device.type, enabled=False):  # millimetres of 0.5 m poses: float32
+            relative = relative_pose10_torch(batch[ACTION].float(), states[:, -1].float())
+        trajectory = self.action_scaler(relative)
         noise = torch.randn_like(trajectory)
         # Input perturbation (UMI): the model sees slightly more noise than it is asked to predict.
         perturbed = noise + self.config.input_perturbation * torch.randn_like(trajectory)
@@ -245,7 +250,8 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
     def predict_action_chunk(
         self, batch: dict[str, Tensor], generator: torch.Generator | None = None
     ) -> Tensor:
-        """Relative action chunk (B, horizon, 10) for a batch with (B, n_obs, ...) observations.
+        """Absolute action chunk (B, horizon, 10) for a batch with (B, n_obs, ...) observations (a batch
+        of single observations without a time axis is taken as one observed step).
 
         Sampling leaves an enclosing autocast (``lerobot-eval`` opens one for checkpoints trained with
         ``use_amp``) unless ``autocast_inference`` is set: see the config field.
@@ -256,20 +262,25 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         with torch.autocast(
             device_type, enabled=self.config.autocast_inference and torch.is_autocast_enabled(device_type)
         ):
-            return model.sample(batch, generator=generator)
+            relative = model.sample(batch, generator=generator)
+        current = batch[OBS_STATE] if batch[OBS_STATE].ndim == 2 else batch[OBS_STATE][:, -1]
+        with torch.autocast(device_type, enabled=False):  # pose algebra in float32, whatever encloses us
+            return absolute_pose10_torch(relative.float(), current.float())
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
-        """Next action (B, 10), relative to the pose observed in ``batch`` (the postprocessor makes it
-        absolute). A new chunk is predicted every ``n_action_steps`` calls."""
+        """Next absolute action (B, 10); a new chunk is predicted every ``n_action_steps`` calls."""
         batch = {k: v for k, v in batch.items() if k in self._queues}
         self._queues = populate_queues(self._queues, batch)
-        current = batch[OBS_STATE]
         if not self._actions:
             stacked = {k: torch.stack(list(q), dim=1) for k, q in self._queues.items()}
             chunk = self.predict_action_chunk(stacked, generator=generator)
-            # Keep the chunk in absolute form: later steps are re-expressed relative to the pose
-            # observed then, which is what the postprocessor will compose them with.
-            absolute = absolute_pose10_torch(chunk[:, : self.config.n_action_steps], current)
-            self._actions.extend(absolute.transpose(0, 1))
-        return relative_pose10_torch(self._actions.popleft()[:, None], current)[:, 0]
+            self._actions.extend(chunk[:, : self.config.n_action_steps].transpose(0, 1))
+        return self._actions.popleft()
+
+
+class BboxDiffusionPaperPolicy(BboxDiffusionPolicy):
+    """The same policy with the paper's defaults (``--policy.type=bbox_diffusion_paper``)."""
+
+    config_class = BboxDiffusionPaperConfig
+    name = "bbox_diffusion_paper"

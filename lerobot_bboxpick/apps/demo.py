@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from lerobot_bboxpick.expert import ScriptedExpert
 from lerobot_bboxpick.sim.env import LegoPickEnv
+from lerobot_bboxpick.sim.expert import ScriptedExpert
 from lerobot_bboxpick.sim.layouts import SETTINGS
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 from lerobot_bboxpick.viz import contact_sheet, label, save_mp4, save_png

@@ -12,12 +12,20 @@ import gymnasium as gym
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.utils import freeze_after_episode_end
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
+from lerobot_bboxpick.keys import (
+    ACTION,
+    BBOX,
+    ENV_BBOX,
+    ENV_CAMERA,
+    ENV_PIXELS,
+    ENV_STATE,
+    STATE,
+    WRIST_IMAGE,
+)
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 
-OBS_BBOX = "observation.bbox"
-WRIST_IMAGE = f"{OBS_IMAGES}.wrist"
+_PIXELS = f"{ENV_PIXELS}/{ENV_CAMERA}"
 
 
 @EnvConfig.register_subclass("lego_pick")
@@ -41,17 +49,17 @@ class LegoPickEnvConfig(EnvConfig):
     features: dict[str, PolicyFeature] = field(
         default_factory=lambda: {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(10,)),
-            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(10,)),
-            "pixels/wrist": PolicyFeature(type=FeatureType.VISUAL, shape=(224, 224, 3)),
-            "bbox": PolicyFeature(type=FeatureType.STATE, shape=(4,)),
+            ENV_STATE: PolicyFeature(type=FeatureType.STATE, shape=(10,)),
+            _PIXELS: PolicyFeature(type=FeatureType.VISUAL, shape=(224, 224, 3)),
+            ENV_BBOX: PolicyFeature(type=FeatureType.STATE, shape=(4,)),
         }
     )
     features_map: dict[str, str] = field(
         default_factory=lambda: {
             ACTION: ACTION,
-            "agent_pos": OBS_STATE,
-            "pixels/wrist": WRIST_IMAGE,
-            "bbox": OBS_BBOX,
+            ENV_STATE: STATE,
+            _PIXELS: WRIST_IMAGE,
+            ENV_BBOX: BBOX,
         }
     )
 
@@ -91,4 +99,4 @@ class LegoPickEnvConfig(EnvConfig):
         return {self.type: {0: vec}}
 
 
-__all__ = ["LegoPickEnvConfig", "SETTINGS", "OBS_BBOX", "WRIST_IMAGE"]
+__all__ = ["LegoPickEnvConfig", "SETTINGS"]

@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     if args.command == "run":
-        from lerobot_bboxpick.pipeline import run_pipeline
+        from lerobot_bboxpick.apps.main_job import run_pipeline
 
         overrides = {"bbox_mode": args.bbox_mode}
         if args.amp is not None:
@@ -68,34 +68,34 @@ def main(argv: list[str] | None = None) -> int:
         print(table.read_text())
         print(f"report (table, bar chart, per-episode JSONL, videos) in {table.parent.resolve()}")
     elif args.command == "demo":
-        from lerobot_bboxpick.demo import run_demo
+        from lerobot_bboxpick.apps.demo import run_demo
 
         table = run_demo(args.out_dir, episodes=args.episodes, seed=args.seed, settings=args.settings)
         print(table.read_text())
         print(f"videos, contact sheet and tables in {args.out_dir.resolve()}")
     elif args.command == "bench":
-        from lerobot_bboxpick.bench import bench_table
+        from lerobot_bboxpick.apps.bench import bench_table
 
         table = bench_table(args.settings, steps=args.steps)
         if args.all:
             args.policies = args.collect = args.suite = True
         if args.policies:
-            from lerobot_bboxpick.bench import bench_policies
+            from lerobot_bboxpick.apps.bench import bench_policies
 
             table += "\n\n" + bench_policies()
         if args.collect:
-            from lerobot_bboxpick.bench import bench_collect
+            from lerobot_bboxpick.apps.bench import bench_collect
 
             table += "\n\n" + bench_collect()
         if args.suite:
-            from lerobot_bboxpick.bench import bench_suite
+            from lerobot_bboxpick.apps.bench import bench_suite
 
             table += "\n\n" + bench_suite()
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(table + "\n")
         print(table)
     else:
-        from lerobot_bboxpick.demo import settings_sheet
+        from lerobot_bboxpick.apps.demo import settings_sheet
         from lerobot_bboxpick.viz import save_png
 
         print(save_png(args.out, settings_sheet(seed=args.seed)))

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from lerobot_bboxpick.expert import ScriptedExpert
 from lerobot_bboxpick.sim.env import LegoPickEnv
+from lerobot_bboxpick.sim.expert import ScriptedExpert
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
 

@@ -7,10 +7,11 @@ target and its grid neighbour): the first frames of both kinds of episode are th
 the bbox tells the policy where to go, and the checkpoint's target sensitivity means something (a
 one-target checkpoint has no reason to read the bbox at all).
 
-    python -m lerobot_bboxpick.canary record --root outputs/canary/data --seed 0 --episodes 5
+    python -m lerobot_bboxpick.apps.canary record --root outputs/canary/data --seed 0 --episodes 5
     lerobot-train ... (see examples/canary.sh)
-    python -m lerobot_bboxpick.canary evaluate --policy outputs/canary/train/checkpoints/last/pretrained_model
-    python -m lerobot_bboxpick.canary sensitivity --policy <the same checkpoint>
+    python -m lerobot_bboxpick.apps.canary evaluate \
+        --policy outputs/canary/train/checkpoints/last/pretrained_model
+    python -m lerobot_bboxpick.apps.canary sensitivity --policy <the same checkpoint>
 """
 
 from __future__ import annotations
@@ -35,11 +36,11 @@ def grid_neighbour(layout) -> int:
 
 def canary_targets(seed: int, count: int, setting: str = "grid_id") -> list[int]:
     """The designated bricks of the canary's scene: the seed's target, then (count=2) its grid neighbour."""
-    from lerobot_bboxpick.sim.layouts import make_layout
+    from lerobot_bboxpick.sim.layouts import make_layout, scene_rng
 
     if count not in (1, 2):
         raise ValueError(f"targets={count} must be 1 (the seed's target) or 2 (it and its grid neighbour)")
-    layout = make_layout(setting, np.random.default_rng(seed))
+    layout = make_layout(setting, scene_rng(setting, seed))
     return [layout.target, grid_neighbour(layout)][:count]
 
 
@@ -109,12 +110,11 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
     import torch
 
     from lerobot_bboxpick.eval.rollout import PolicyRunner
-    from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import absolute_pose10_torch
     from lerobot_bboxpick.sim.env import LegoPickEnv
-    from lerobot_bboxpick.sim.layouts import Layout, make_layout
+    from lerobot_bboxpick.sim.layouts import Layout, make_layout, scene_rng
 
     runner = PolicyRunner.from_pretrained(policy_path)
-    layout = make_layout(setting, np.random.default_rng(seed))
+    layout = make_layout(setting, scene_rng(setting, seed))
     first, second = layout.target, grid_neighbour(layout)
     colors = list(layout.colors)
     colors[second] = colors[first]
@@ -133,9 +133,8 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
                 for key, value in batch.items()
                 if key in runner.policy._queues
             }
-            chunk = runner.policy.predict_action_chunk(stacked)
-            state = torch.as_tensor(obs["agent_pos"])[None]
-            ends.append(absolute_pose10_torch(chunk, state)[0, -1, :3].numpy())
+            chunk = runner.policy.predict_action_chunk(stacked)  # absolute poses
+            ends.append(chunk[0, -1, :3].numpy())
         end = np.mean(ends, axis=0)
         result[f"bbox_on_{designated}"] = {
             "end_point": end.round(4).tolist(),
@@ -152,9 +151,9 @@ def target_sensitivity(policy_path: Path, seed: int, samples: int = 5, setting: 
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m lerobot_bboxpick.canary record|evaluate``."""
+    """``python -m lerobot_bboxpick.apps.canary record|evaluate``."""
     parser = argparse.ArgumentParser(
-        prog="lerobot_bboxpick.canary",
+        prog="lerobot_bboxpick.apps.canary",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

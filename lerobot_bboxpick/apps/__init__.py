@@ -1,0 +1,1 @@
+"""Applications built on the library: the main job, the canary, the demo, the benchmarks and the CLI."""

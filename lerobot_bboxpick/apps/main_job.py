@@ -1,0 +1,310 @@
+"""The main job end to end: collect expert demos -> ``lerobot-train`` the CPU preset -> ``bboxpick-suite``.
+
+    lerobot_bboxpick run                  # quick profile: ~15 min on 2 cores, sized to this machine
+    lerobot_bboxpick run --profile full   # the 90-minute CPU recipe and the full 6 x 30 suite
+    lerobot_bboxpick run --profile full --bbox-mode none   # the no-prompt ablation on the same demos
+
+Each stage is the project's (or LeRobot's) own command, run with the options printed beside it, and
+each one resumes: collection continues its shards, training continues from its last checkpoint,
+the suite keeps the episodes already in its JSONL. Re-running a finished job only re-prints the table.
+
+Machines of this kind differ 3-4x in speed, so training is sized by time, not by a fixed step count:
+the first ``CALIBRATION_STEPS`` steps of the real ``lerobot-train`` run measure this machine's rate,
+and the quick profile derives its step count from its time budget (both printed). Precision follows
+the CPU (``lerobot_bboxpick.precision``). Third-party output (lerobot-train's log, dataset bars,
+encoder lines) goes to ``<out>/logs``; the console shows our progress bars and the ETA of each stage.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from tqdm import tqdm
+
+from lerobot_bboxpick import seeds
+from lerobot_bboxpick.precision import PrecisionChoice, choose_precision
+from lerobot_bboxpick.sim.layouts import SETTINGS
+
+CALIBRATION_STEPS = 40  # the first steps of the real run; their rate sizes the rest
+# lerobot-train's log line: "... updt_s:0.412 data_s:0.003" (means over the last log interval).
+_STEP_LINE = re.compile(r"step:(\S+) .*updt_s:([\d.]+) data_s:([\d.]+)")
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Sizes of one end-to-end run."""
+
+    episodes: int  # expert demonstrations collected (training seeds from 0)
+    train_settings: str  # settings the demos come from (seeds cycle through them)
+    # Training length: a time budget (steps derived from the calibrated rate, capped at ``steps``), or
+    # None for a fixed ``steps`` (a recipe is defined by its samples: steps x batch_size).
+    train_minutes: float | None
+    steps: int
+    batch_size: int
+    warmup_steps: int
+    suite_episodes: int  # per setting, test seeds from 10000
+    videos: int  # rollout MP4s kept per setting
+    bbox_mode: str = "mask"
+    # Chunk steps executed before predicting again, and the augmented mask's centroid/size as extra
+    # conditioning (mask mode only): the cpu preset's choices, re-checked on validation seeds
+    # (docs/results.md).
+    n_action_steps: int = 12
+    mask_centroid: bool = True
+    # lerobot-train's --policy.use_amp (bf16 autocast for encoder and UNet); None: bf16 only where the
+    # CPU runs it natively (lerobot_bboxpick.precision).
+    use_amp: bool | None = None
+
+
+PROFILES = {
+    # About 15 minutes on any machine of this kind: ~10 of them training, whatever the machine's rate.
+    "quick": Profile(
+        episodes=30,
+        train_settings="grid_id,identical_4",
+        train_minutes=10.0,
+        steps=3000,
+        batch_size=32,
+        warmup_steps=100,
+        suite_episodes=2,
+        videos=1,
+    ),
+    # The CPU recipe (docs/results.md): 5000 steps of batch 32 (160k samples), ~45 min at ~1.9 steps/s
+    # with bf16 autocast on a 2-core CPU that has it natively, ~80 min in float32.
+    "full": Profile(
+        episodes=200,
+        train_settings="grid_id,identical_4",
+        train_minutes=None,
+        steps=5000,
+        batch_size=32,
+        warmup_steps=300,
+        suite_episodes=30,
+        videos=2,
+    ),
+}
+
+
+def _bin(name: str) -> str:
+    return str(Path(sys.executable).parent / name)
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "HF_HUB_OFFLINE": "1"}
+
+
+def _episodes_in(root: Path) -> int:
+    info = root / "meta" / "info.json"
+    return json.loads(info.read_text())["total_episodes"] if info.exists() else 0
+
+
+def train_command(
+    profile: Profile, dataset_root: Path, repo_id: str, out: Path, steps: int, use_amp: bool
+) -> list[str]:
+    """The ``lerobot-train`` call training to ``steps`` (resuming when ``out`` holds a checkpoint)."""
+    save_freq = f"--save_freq={max(CALIBRATION_STEPS, steps // 5)}"
+    last = out / "checkpoints" / "last" / "pretrained_model"
+    if (last / "train_config.json").exists():
+        # --steps follows the caller, so a run resumed after calibration (or a grown profile) trains
+        # to the new length.
+        return [
+            _bin("lerobot-train"),
+            f"--config_path={last / 'train_config.json'}",
+            "--resume=true",
+            f"--steps={steps}",
+            save_freq,
+        ]
+    return [
+        _bin("lerobot-train"),
+        "--policy.type=bbox_diffusion",
+        f"--policy.bbox_mode={profile.bbox_mode}",
+        f"--policy.mask_centroid={str(profile.mask_centroid and profile.bbox_mode == 'mask').lower()}",
+        "--policy.device=cpu",
+        f"--policy.scheduler_warmup_steps={profile.warmup_steps}",
+        f"--policy.n_action_steps={profile.n_action_steps}",
+        f"--policy.use_amp={str(use_amp).lower()}",
+        f"--dataset.repo_id={repo_id}",
+        f"--dataset.root={dataset_root}",
+        f"--output_dir={out}",
+        f"--steps={steps}",
+        f"--batch_size={profile.batch_size}",
+        "--num_workers=1",
+        save_freq,
+        "--log_freq=10",
+        "--wandb.enable=false",
+    ]
+
+
+def trained_steps(out: Path) -> int:
+    """Optimisation steps of the last checkpoint in a lerobot-train output folder (0 if none)."""
+    state = out / "checkpoints" / "last" / "training_state" / "training_step.json"
+    return json.loads(state.read_text())["step"] if state.exists() else 0
+
+
+def run_train(cmd: list[str], log: Path, start: int, total: int) -> float | None:
+    """Run ``lerobot-train`` with its output in ``log`` and our progress bar on the console.
+
+    Returns the measured seconds per step (the mean of its logged update + data times), or None.
+    """
+    print("+ " + shlex.join(cmd), flush=True)
+    print(f"  lerobot-train's log: {log}", flush=True)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    per_step: list[float] = []
+    with open(log, "a") as sink, tqdm(total=total, initial=start, desc="train", unit="step") as bar:
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=_env(), bufsize=1
+        )
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            sink.write(line)
+            match = _STEP_LINE.search(line)
+            if match:
+                step = _parse_count(match.group(1))
+                per_step.append(float(match.group(2)) + float(match.group(3)))
+                bar.update(max(0, step - bar.n))
+        if proc.wait() != 0:
+            raise subprocess.CalledProcessError(proc.returncode, cmd, output=f"see {log}")
+    # The first interval includes warm-up (first batches, allocator); later ones are the steady rate.
+    steady = per_step[1:] or per_step
+    return sum(steady) / len(steady) if steady else None
+
+
+def _parse_count(text: str) -> int:
+    """LeRobot's ``format_big_number``: 40, 1K, 1.2K ... -> int."""
+    scale = {"K": 1e3, "M": 1e6, "B": 1e9}
+    return int(float(text[:-1]) * scale[text[-1]]) if text[-1] in scale else int(float(text))
+
+
+def budget_steps(profile: Profile, seconds_per_step: float) -> int:
+    """Steps that fit the profile's time budget at the measured rate (``profile.steps`` if it has none)."""
+    if profile.train_minutes is None:
+        return profile.steps
+    fitted = int(profile.train_minutes * 60 / seconds_per_step)
+    return max(CALIBRATION_STEPS, min(profile.steps, fitted))
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:.1f} min"
+
+
+def run_pipeline(profile_name: str = "quick", out_dir: Path = Path("outputs/main"), **overrides) -> Path:
+    """Collect -> train -> suite for a profile; returns the suite's table.md."""
+    from lerobot_bboxpick.data.collect import CollectConfig, collect
+    from lerobot_bboxpick.eval.suite import SuiteConfig, run_suite
+
+    profile = replace(PROFILES[profile_name], **overrides)
+    out_dir = Path(out_dir) / profile_name
+    logs = out_dir / "logs"
+    repo_id = f"local/lego_pick_{profile_name}"
+    data = out_dir / "data"
+    t0 = time.perf_counter()
+    print(
+        f"[1/3] expert demos: {profile.episodes} in {profile.train_settings} "
+        f"(training seeds from {seeds.TRAIN_START}) -> {data}; ETA on the bar",
+        flush=True,
+    )
+    if _episodes_in(data) < profile.episodes:
+        summary = collect(
+            CollectConfig(
+                repo_id=repo_id,
+                root=data,
+                settings=profile.train_settings,
+                episodes=profile.episodes,
+                workers=2,
+                resume=True,
+                log_file=logs / "collect.log",
+            )
+        )
+        print(json.dumps(summary), flush=True)
+    t1 = time.perf_counter()
+
+    # The demos serve every bbox_mode; training and suite folders are per mode (ablations side by side).
+    suffix = "" if profile.bbox_mode == "mask" else f"_{profile.bbox_mode}"
+    train = out_dir / f"train{suffix}"
+    precision = _precision(train, profile.use_amp)
+    print(f"[2/3] lerobot-train bbox_diffusion (cpu preset) -> {train}; precision: {precision.reason}")
+    steps = _sized_steps(train)
+    log = logs / f"train{suffix}.log"
+    if steps is None:  # no sizing recorded yet: calibrate on the first steps of the real run
+        print(f"  calibrating: the first {CALIBRATION_STEPS} steps measure this machine's rate", flush=True)
+        if trained_steps(train) < CALIBRATION_STEPS:
+            cmd = train_command(profile, data, repo_id, train, CALIBRATION_STEPS, precision.use_amp)
+            seconds_per_step = run_train(cmd, log, trained_steps(train), CALIBRATION_STEPS)
+        else:
+            seconds_per_step = None
+        seconds_per_step = seconds_per_step or _fallback_rate(log)
+        steps = budget_steps(profile, seconds_per_step)
+        sizing = {
+            "seconds_per_step": round(seconds_per_step, 4),
+            "samples_per_s": round(profile.batch_size / seconds_per_step, 2),
+            "precision": precision.name,
+            "train_minutes": profile.train_minutes,
+            "steps": steps,
+            "samples": steps * profile.batch_size,
+        }
+        (train / "sizing.json").write_text(json.dumps(sizing, indent=1))
+        budget = f"budget {profile.train_minutes:g} min -> " if profile.train_minutes else "fixed "
+        print(
+            f"  measured {sizing['samples_per_s']} samples/s ({seconds_per_step:.2f} s/step, "
+            f"batch {profile.batch_size}, {precision.name}); {budget}{steps} steps "
+            f"({sizing['samples']} samples); ETA {_minutes((steps - CALIBRATION_STEPS) * seconds_per_step)}",
+            flush=True,
+        )
+    if trained_steps(train) < steps:
+        cmd = train_command(profile, data, repo_id, train, steps, precision.use_amp)
+        run_train(cmd, log, trained_steps(train), steps)
+    t2 = time.perf_counter()
+
+    checkpoint = train / "checkpoints" / "last" / "pretrained_model"
+    n_episodes = 2 * len(SETTINGS) * profile.suite_episodes
+    print(
+        f"[3/3] bboxpick-suite: policy + expert, {profile.suite_episodes} test episodes x 6 settings "
+        f"({n_episodes} episodes, ~3 s each on 2 workers: ETA ~{_minutes(n_episodes * 1.6)})",
+        flush=True,
+    )
+    table = run_suite(
+        SuiteConfig(
+            policies=f"expert,bbox_diffusion{suffix}={checkpoint}",
+            settings=",".join(SETTINGS),
+            episodes=profile.suite_episodes,
+            videos=profile.videos,
+            out_dir=out_dir / f"suite{suffix}",
+        )
+    )
+    t3 = time.perf_counter()
+    print(
+        f"minutes: collect {(t1 - t0) / 60:.1f}, train {(t2 - t1) / 60:.1f}, suite {(t3 - t2) / 60:.1f}",
+        flush=True,
+    )
+    return table
+
+
+def _precision(train: Path, requested: bool | None) -> PrecisionChoice:
+    """The run's precision: what an existing checkpoint was started with, else the CPU's choice."""
+    config = train / "checkpoints" / "last" / "pretrained_model" / "config.json"
+    if config.exists() and requested is None:
+        use_amp = bool(json.loads(config.read_text()).get("use_amp", False))
+        return PrecisionChoice(use_amp, f"{'bf16 autocast' if use_amp else 'float32'}, as the run began")
+    return choose_precision(requested)
+
+
+def _sized_steps(train: Path) -> int | None:
+    sizing = train / "sizing.json"
+    return json.loads(sizing.read_text())["steps"] if sizing.exists() else None
+
+
+def _fallback_rate(log: Path) -> float:
+    """Seconds per step from an earlier log of this run (a calibration interrupted after its checkpoint)."""
+    values = [
+        float(m.group(2)) + float(m.group(3))
+        for m in map(_STEP_LINE.search, log.read_text().splitlines() if log.exists() else [])
+        if m
+    ]
+    if not values:
+        raise RuntimeError(f"no lerobot-train step timings in {log}; delete the training folder and re-run")
+    return sum(values) / len(values)
