@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The canary (issue 4): 5 expert demos of ONE grid_id scene, train the CPU preset <= 15 min, then 5
-# closed-loop runs on that scene and the target-sensitivity check on the same checkpoint.
+# The canary: 5 expert demos of ONE grid_id scene (a training seed), train bbox_diffusion on them for a
+# few minutes, then 5 closed-loop runs on that scene and the target-sensitivity check on the same
+# checkpoint. It proves the chain data -> relative poses -> chunk execution -> absolute actions.
 # TARGETS=2 designates the scene's target and its grid neighbour in turn (same first image, only the
 # bbox tells them apart), in the demos and in the runs.
 # Run from the repository root; sources scripts/setup.sh (creates .venv when missing).
@@ -9,18 +10,17 @@ source scripts/setup.sh
 SEED=${SEED:-0}
 OUT=${OUT:-outputs/canary}
 TARGETS=${TARGETS:-1}
-STEPS=${STEPS:-1500}  # 12-14 min at 1.8-2.1 steps/s (batch 32, bf16 autocast) on 2 cores
-# The cpu preset as it is (mask centroid on). On 2026-12-01 it picked 5/5 executing 8 and 16 steps per
-# chunk and 0/5 executing 12 (the preset's value: a re-plan lands at the grasp), so all three run.
-# MASK_CENTROID=false trains without the centroid: 5/5 at 12 and 16, but then the one-scene policy
-# does not read the bbox at all (README, "The canary").
+STEPS=${STEPS:-1500}  # batch 32; the time depends on the CPU (lerobot-train prints its rate)
+# The defaults as they are (mask centroid on); which number of executed steps per chunk works best on a
+# 5-demo policy varies between runs, so all three run. MASK_CENTROID=false trains without the centroid.
 MASK_CENTROID=${MASK_CENTROID:-true}
+AMP=$(python -c "from lerobot_bboxpick.precision import choose_precision as c; print(str(c().use_amp).lower())")
 EXEC_STEPS=${EXEC_STEPS:-8 12 16}
 [ -d "$OUT/data" ] || python -m lerobot_bboxpick.apps.canary record --root "$OUT/data" --seed "$SEED" \
   --episodes 5 --targets "$TARGETS"
 rm -rf "$OUT/train"
 OMP_NUM_THREADS=2 lerobot-train --policy.type=bbox_diffusion --policy.device=cpu \
-  --policy.use_amp=true --policy.mask_centroid="$MASK_CENTROID" --policy.scheduler_warmup_steps=100 \
+  --policy.use_amp="$AMP" --policy.mask_centroid="$MASK_CENTROID" --policy.scheduler_warmup_steps=100 \
   --dataset.repo_id=local/canary --dataset.root="$OUT/data" --output_dir="$OUT/train" \
   --steps="$STEPS" --batch_size=32 --num_workers=1 --save_freq=500 --log_freq=50 --wandb.enable=false
 CKPT="$OUT/train/checkpoints/last/pretrained_model"

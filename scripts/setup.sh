@@ -7,6 +7,16 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+# apt's and pip's own output (setuptools warnings, download lines) goes here, not to the console.
+SETUP_LOG="$ROOT/outputs/logs/setup.log"
+mkdir -p "$(dirname "$SETUP_LOG")"
+quietly() {  # run a set-up step with its output in the log; show the log's tail if it fails
+  if ! "$@" >>"$SETUP_LOG" 2>&1; then
+    echo "[setup] FAILED: $* (last lines of $SETUP_LOG below)" >&2
+    tail -n 30 "$SETUP_LOG" >&2
+    exit 1
+  fi
+}
 
 # Mesa EGL for headless MuJoCo rendering; FFmpeg's libraries for torchcodec, LeRobot's fast video
 # decoder (without them LeRobot falls back to PyAV with a long warning).
@@ -16,10 +26,10 @@ system_libs_present() {
 }
 if ! system_libs_present; then
   if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
-    echo "[setup] installing Debian packages: Mesa EGL (headless rendering), FFmpeg (video decoding)"
-    apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
-      libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg >/dev/null
+    echo "[setup] installing Debian packages: Mesa EGL (headless rendering), FFmpeg (video decoding); log: $SETUP_LOG"
+    quietly apt-get update -qq
+    quietly env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+      libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg
   else
     echo "[setup] WARNING: missing system libraries and not root:" \
       "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg" >&2
@@ -48,9 +58,9 @@ fi
 
 stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
 if [ ! -f "$stamp" ]; then
-  echo "[setup] installing the project into .venv (first time: several GB, a few minutes)"
-  .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e ".[dev]"
+  echo "[setup] installing the project into .venv (first time: several GB, a few minutes); log: $SETUP_LOG"
+  quietly .venv/bin/python -m pip install --upgrade pip
+  quietly .venv/bin/python -m pip install -e ".[dev]"
   rm -f .venv/.installed-*
   touch "$stamp"
 fi

@@ -99,6 +99,7 @@ def test_defaults_are_what_the_policy_uses():
     assert (explicit.n_action_steps, explicit.mask_centroid) == (4, False)
 
 
+@pytest.mark.slow
 def test_train_saves_a_loadable_checkpoint_with_its_processors(checkpoint):
     config = json.loads((checkpoint / "config.json").read_text())
     assert config["type"] == "bbox_diffusion" and config["bbox_mode"] == "mask"
@@ -109,6 +110,7 @@ def test_train_saves_a_loadable_checkpoint_with_its_processors(checkpoint):
     assert "normalizer_processor" in [s["registry_name"] for s in pre["steps"]]
 
 
+@pytest.mark.slow
 def test_eval_runs_the_checkpoint_in_lego_pick(checkpoint, tmp_path):
     out = tmp_path / "eval"
     cmd = [
@@ -129,6 +131,7 @@ def test_eval_runs_the_checkpoint_in_lego_pick(checkpoint, tmp_path):
     assert info["overall"]["n_episodes"] == 1 and info["overall"]["pc_success"] == 0.0
 
 
+@pytest.mark.slow
 def test_checkpoint_actions_are_absolute_poses_composed_with_the_observed_pose(checkpoint):
     """A loaded checkpoint returns T_observed @ T_rel from select_action itself (no hidden state in the
     processors): the postprocessor leaves it unchanged and it equals the model's relative sample

@@ -6,12 +6,14 @@ import sys
 from pathlib import Path
 
 import cv2
+import pytest
 
 from lerobot_bboxpick.apps.cli import main
 
 BIN = Path(sys.executable).parent
 
 
+@pytest.mark.slow
 def test_demo_writes_video_sheet_and_table(tmp_path):
     out = tmp_path / "demo"
     assert main(["demo", "--out-dir", str(out), "--settings", "grid_id,identical_2"]) == 0
@@ -26,6 +28,7 @@ def test_demo_writes_video_sheet_and_table(tmp_path):
     assert sheet.shape == (448, 3 * 448, 3)
 
 
+@pytest.mark.slow
 def test_unknown_setting_is_refused_with_the_valid_list():
     result = subprocess.run(
         [BIN / "lerobot_bboxpick", "demo", "--settings", "grid_id,piles"], capture_output=True, text=True
@@ -34,6 +37,7 @@ def test_unknown_setting_is_refused_with_the_valid_list():
     assert "setting='piles'" in result.stderr and "identical_4" in result.stderr
 
 
+@pytest.mark.slow
 def test_non_positive_episode_count_is_refused():
     result = subprocess.run(
         [BIN / "lerobot_bboxpick", "demo", "--episodes", "0"], capture_output=True, text=True

@@ -16,6 +16,8 @@ from lerobot_bboxpick.data.replay import episode_arrays, load_dataset, replay_da
 from lerobot_bboxpick.sim.env import LegoPickEnv
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
+pytestmark = pytest.mark.slow  # end-to-end: real datasets, subprocesses, rollouts
+
 BIN = Path(sys.executable).parent
 REPO = "test/expert"
 

@@ -48,6 +48,7 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return inter / union
 
 
+@pytest.mark.slow
 def test_bbox_matches_rendered_segmentation():
     """IoU >= 0.8 on >= 95% of frames where the target is fully visible (in view and unoccluded)."""
     ious = []

@@ -20,6 +20,8 @@ from tiny_policy import save_tiny_policy
 from lerobot_bboxpick.sim.env_config import LegoPickEnvConfig
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
+pytestmark = pytest.mark.slow  # end-to-end: real datasets, subprocesses, rollouts
+
 LEROBOT_EVAL = Path(sys.executable).parent / "lerobot-eval"
 SEED = 10000
 N_EPISODES = 2

@@ -74,6 +74,7 @@ def test_swap_left_right_and_mirror_layout():
             assert describe_target(m) == swap_left_right(describe_target(layout))
 
 
+@pytest.mark.slow
 def test_mirrored_episode_replays_in_mirrored_scene(grid_env, rollouts):
     """THE KEY TEST: open-loop replay of the mirrored actions from the mirrored start picks the target."""
     for r in rollouts:
@@ -158,6 +159,7 @@ def _columns(ds: LeRobotDataset, start: int, stop: int) -> dict[str, np.ndarray]
     return {c: np.stack([np.asarray(v) for v in rows[c]]).reshape(stop - start, -1) for c in COLUMNS}
 
 
+@pytest.mark.slow
 def test_mirror_dataset(src_dataset):
     src, n_ep = src_dataset, src_dataset.num_episodes
     dst_root = src.root.parent / "dst"

@@ -26,6 +26,7 @@ def test_shift_is_zero_when_the_bbox_cannot_matter(tmp_path, mask_centroid: bool
     assert gap <= 0.075 + 1e-6
 
 
+@pytest.mark.slow
 def test_canary_designates_two_neighbouring_bricks_of_one_scene(tmp_path) -> None:
     """The two-target canary's demos alternate between the seed's target and its grid neighbour, so the
     same first image needs two different chunks and only the bbox can tell the policy which one."""

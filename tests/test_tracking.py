@@ -26,6 +26,7 @@ def test_bbox_iou_vectorised():
         bbox_iou(np.zeros(3), np.zeros(4))
 
 
+@pytest.mark.slow
 def test_tracks_expert_episode(episode):
     frames, true = episode
     t = time.time()

@@ -25,6 +25,8 @@ from lerobot_bboxpick.data.features import (
 from lerobot_bboxpick.data.tracking import bbox_iou
 from lerobot_bboxpick.data.umi_zarr import export_umi_zarr, import_umi_zarr
 
+pytestmark = pytest.mark.slow  # end-to-end: real datasets, subprocesses, rollouts
+
 TASK = "pick up the block in the box"
 EFFORT = 1  # fast JPEG-XL encoder setting for tests (same codec, same lossless level-99 output)
 

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from lerobot_bboxpick.precision import choose_precision
 from lerobot_bboxpick.sim.env import LegoPickEnv
 from lerobot_bboxpick.sim.expert import ScriptedExpert
 from lerobot_bboxpick.sim.layouts import SETTINGS
@@ -147,10 +148,12 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
     stock_cfg.normalization_mapping = {k: NormalizationMode.IDENTITY for k in ("VISUAL", "STATE", "ACTION")}
     stock = DiffusionPolicy(stock_cfg)
     ours_name, stock_name = "bbox_diffusion (cpu preset)", "LeRobot diffusion (stock)"
-    precisions = {"float32": False, "bf16 autocast": True}
+    # LeRobot's ``--policy.use_amp=true`` trains under bf16 autocast on the CPU (Accelerate). Where the
+    # CPU runs bf16 natively both policies are timed both ways; where it would be emulated (~70x slower
+    # matmuls) only float32 is, or the bench would not finish (lerobot_bboxpick.precision).
+    choice = choose_precision()
+    precisions = {"float32": False, "bf16 autocast": True} if choice.use_amp else {"float32": False}
     rows = {}
-    # LeRobot's ``--policy.use_amp=true`` trains under bf16 autocast on the CPU (Accelerate); with AMX
-    # (Sapphire Rapids and newer) that halves our step time, so both policies are timed both ways.
     for precision, amp in precisions.items():
         for name, policy in ((ours_name, ours), (stock_name, stock)):
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=amp):
@@ -158,6 +161,7 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
             n = sum(p.numel() for p in policy.parameters() if p.requires_grad) / 1e6
             rows[(name, precision)] = (sps, ms, n)
     lines = [
+        f"Precision: {choice.reason}.\n",
         f"| policy ({image_size} px input, batch {batch_size}) | precision | train samples/s | ms per "
         "16-step DDIM chunk | trainable params (M) |",
         "|---|---|---|---|---|",
@@ -179,7 +183,7 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
     vit_ms = 1000 * (time.perf_counter() - t0)
     n_vit = sum(p.numel() for p in vit.parameters()) / 1e6
     lines.append(
-        f"\nPaper preset encoder (CLIP ViT-L/14 @ 224): {n_vit:.0f} M parameters, "
+        f"\nPaper type's encoder (CLIP ViT-L/14 @ 224): {n_vit:.0f} M parameters, "
         f"{vit_ms:.0f} ms to encode the 2 observation frames on this CPU."
     )
     return "\n".join(lines)

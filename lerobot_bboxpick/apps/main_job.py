@@ -34,6 +34,7 @@ from lerobot_bboxpick.precision import PrecisionChoice, choose_precision
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
 CALIBRATION_STEPS = 40  # the first steps of the real run; their rate sizes the rest
+LOG_FREQ = 10  # lerobot-train logs every this many steps
 # lerobot-train's log line: "... updt_s:0.412 data_s:0.003" (means over the last log interval).
 _STEP_LINE = re.compile(r"step:(\S+) .*updt_s:([\d.]+) data_s:([\d.]+)")
 
@@ -135,7 +136,7 @@ def train_command(
         f"--batch_size={profile.batch_size}",
         "--num_workers=1",
         save_freq,
-        "--log_freq=10",
+        f"--log_freq={LOG_FREQ}",
         "--wandb.enable=false",
     ]
 
@@ -164,7 +165,9 @@ def run_train(cmd: list[str], log: Path, start: int, total: int) -> float | None
             sink.write(line)
             match = _STEP_LINE.search(line)
             if match:
-                step = _parse_count(match.group(1))
+                # LeRobot abbreviates steps from 1000 on ("step:3K"): then count log lines instead.
+                logged = match.group(1)
+                step = _parse_count(logged) if logged.isdigit() else bar.n + LOG_FREQ
                 per_step.append(float(match.group(2)) + float(match.group(3)))
                 bar.update(max(0, step - bar.n))
         if proc.wait() != 0:

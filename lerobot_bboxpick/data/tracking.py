@@ -97,9 +97,12 @@ def _components(mask: np.ndarray, offset: tuple[int, int]) -> tuple[np.ndarray, 
 
 
 class BoxTracker:
-    """Online form of :func:`track_bbox`: give it the first frame and box, then one frame at a time.
+    """Follows a target from its first box, one frame at a time (``update``).
 
-    Used closed loop (the suite's ``tracked`` bbox source) as well as offline (``track_bbox``).
+    Used closed loop (the suite's ``tracked`` bbox source) and offline (:func:`track_bbox`).
+    ``threshold`` is the foreground probability of a pixel's colour above which it counts as the
+    target; ``adapt_rate`` blends each found box's colours into the model; a component counts as the
+    target only if its area is within [min_area_ratio, max_area_ratio] of the previous box's.
     """
 
     def __init__(
@@ -206,20 +209,13 @@ def _check_frame(frame: np.ndarray, name: str) -> np.ndarray:
     return frame
 
 
-def track_bbox(
-    frames: np.ndarray,
-    first_box: np.ndarray,
-    *,
-    threshold: float = 0.5,
-    adapt_rate: float = 0.03,
-    min_area_ratio: float = 0.35,
-    max_area_ratio: float = 3.0,
-) -> TrackResult:
+def track_bbox(frames: np.ndarray, first_box: np.ndarray, **options: float) -> TrackResult:
     """Propagate the normalised box ``first_box`` on ``frames[0]`` through ``frames`` (T, H, W, 3) RGB.
 
-    ``threshold`` is the foreground probability of a pixel's colour above which it counts as the
-    target; ``adapt_rate`` blends each found box's colours into the model; a component counts as the
-    target only if its area is within [min_area_ratio, max_area_ratio] of the previous box's.
+    ``options`` are :class:`BoxTracker`'s: ``threshold`` is the foreground probability of a pixel's
+    colour above which it counts as the target; ``adapt_rate`` blends each found box's colours into
+    the model; a component counts as the target only if its area is within [``min_area_ratio``,
+    ``max_area_ratio``] of the previous box's.
     """
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
@@ -229,14 +225,7 @@ def track_bbox(
     lost = np.zeros(T, bool)
     if T == 0:
         return TrackResult(boxes, lost)
-    tracker = BoxTracker(
-        frames[0],
-        first_box,
-        threshold=threshold,
-        adapt_rate=adapt_rate,
-        min_area_ratio=min_area_ratio,
-        max_area_ratio=max_area_ratio,
-    )
+    tracker = BoxTracker(frames[0], first_box, **options)
     boxes[0] = tracker.last
     for t in range(1, T):
         boxes[t], lost[t] = tracker.update(frames[t])

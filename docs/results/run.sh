@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Reproduces every table in docs/results.md and copies its artefacts (table.md, table.csv,
+# episodes.jsonl, outcomes.png) into docs/results/<name>/. Run from the repository root on an otherwise
+# idle machine; each step resumes when re-run. STEP=<name> runs one step only.
+set -euo pipefail
+source scripts/setup.sh
+FULL=outputs/main/full
+CKPT=$FULL/train/checkpoints/last/pretrained_model
+publish() {  # publish <suite out_dir> <docs name>
+  mkdir -p "docs/results/$2"
+  cp "$1"/table.md "$1"/table.csv "$1"/episodes.jsonl "$1"/outcomes.png "docs/results/$2/"
+}
+want() { [ -z "${STEP:-}" ] || [ "${STEP}" = "$1" ]; }
+
+# The CPU recipe: collect 200 demos, train 5000 steps, suite on test seeds with the oracle box.
+if want recipe_oracle; then
+  bash examples/train_cpu_90min.sh
+  publish $FULL/suite recipe_oracle
+fi
+# The same checkpoint and test scenes with a person's box (IoU 0.7) and with the tracker's box.
+if want recipe_noisy; then
+  bboxpick-suite --policies=bbox_diffusion=$CKPT --bbox_source=noisy --noisy_iou=0.7 --episodes=30 \
+    --videos=1 --out_dir=$FULL/suite_noisy
+  publish $FULL/suite_noisy recipe_noisy
+fi
+if want recipe_tracked; then
+  bboxpick-suite --policies=bbox_diffusion=$CKPT --bbox_source=tracked --episodes=30 --videos=1 \
+    --out_dir=$FULL/suite_tracked
+  publish $FULL/suite_tracked recipe_tracked
+fi
+# The recipe's choices re-checked on validation seeds 5000-5009: executed steps per chunk, and the
+# training length (the saved checkpoints at 3000, 4000 and 5000 steps).
+if want validation_n_action_steps; then
+  for n in 8 12 16; do
+    bboxpick-suite --policies=exec$n=$CKPT --n_action_steps=$n --settings=grid_id,identical_4,random_id \
+      --episodes=10 --seed_start=5000 --videos=0 --out_dir=$FULL/validation_exec$n
+    publish $FULL/validation_exec$n validation_exec$n
+  done
+fi
+if want validation_steps; then
+  bboxpick-suite --settings=grid_id,identical_4,random_id --episodes=10 --seed_start=5000 --videos=0 \
+    --policies=step3000=$FULL/train/checkpoints/003000/pretrained_model,step4000=$FULL/train/checkpoints/004000/pretrained_model,step5000=$CKPT \
+    --out_dir=$FULL/validation_steps
+  publish $FULL/validation_steps validation_steps
+fi
+# The main job as a new user runs it (README's first command), on a fresh output folder.
+if want main_job; then
+  bash scripts/main.sh --out-dir outputs/main_job | tee outputs/main_job.console.txt
+  publish outputs/main_job/quick/suite main_job
+fi
