@@ -58,7 +58,7 @@ fi
 
 stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
 if [ ! -f "$stamp" ]; then
-  echo "[setup] installing the project into .venv (first time: several GB, a few minutes); log: $SETUP_LOG"
+  echo "[setup] installing the project into .venv (pyproject.toml changed or first run: up to several GB and minutes); log: $SETUP_LOG"
   quietly .venv/bin/python -m pip install --upgrade pip
   quietly .venv/bin/python -m pip install -e ".[dev]"
   rm -f .venv/.installed-*

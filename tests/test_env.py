@@ -188,3 +188,18 @@ def test_each_setting_draws_its_own_scenes():
     a = make_layout("identical_4", scene_rng("identical_4", 3))
     b = make_layout("identical_4", scene_rng("identical_4", 3))
     assert np.array_equal(a.positions, b.positions) and a.colors == b.colors and a.target == b.target
+
+
+def test_mjcf_lookups_fail_loudly_with_the_valid_names():
+    import pytest
+
+    from lerobot_bboxpick.sim.scene import build_model, lookup
+
+    model = build_model()
+    assert lookup(model, "body", "brick_3") >= 0
+    with pytest.raises(KeyError, match=r"no body named 'brick_12'.*brick_0.*brick_11"):
+        lookup(model, "body", "brick_12")
+    with pytest.raises(KeyError, match=r"no light named 'sun'; its lights: key"):
+        lookup(model, "light", "sun")
+    with pytest.raises(ValueError, match="kind='widget'"):
+        lookup(model, "widget", "x")

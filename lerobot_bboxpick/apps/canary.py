@@ -1,4 +1,4 @@
-"""The canary (issue 4): overfit a few expert episodes of ONE scene, then pick in closed loop there.
+"""The canary: overfit a few expert episodes of ONE scene, then pick in closed loop there.
 
 It proves the chain data -> relative poses -> chunk execution -> absolute actions before anyone
 trains at scale (a peer team's policies stopped 30 cm short of the brick because of such a break).

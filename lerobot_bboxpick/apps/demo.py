@@ -1,8 +1,7 @@
-"""The main job on the embedded default: scripted-expert rollouts in every setting, as video and pictures.
+"""``lerobot_bboxpick demo``: scripted-expert rollouts in every setting, as video and pictures.
 
 Writes into ``out_dir``: one MP4 per setting (wrist view, target bbox drawn), a contact sheet of the
 six settings' first frames, a filmstrip of one episode, and ``outcomes.md`` / ``outcomes.csv``.
-Later issues grow this into collect -> train -> evaluate.
 """
 
 from __future__ import annotations

@@ -68,8 +68,8 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # Python dispatch; the trace shares the weights, so EMA updates and loaded checkpoints are seen.
     jit_inference: bool = True
     # ``use_amp`` is a training flag here, but lerobot-eval also samples under autocast when it is set.
-    # On this CPU bf16 sampling is eager and ~3x slower than the float32 trace (118 vs 37 ms per chunk),
-    # so sampling runs in float32 unless this is set (e.g. on a GPU where bf16 inference pays).
+    # On a CPU bf16 sampling is eager and slower than the float32 trace (docs/benchmarks.md), so
+    # sampling runs in float32 unless this is set (e.g. on a GPU where bf16 inference pays).
     autocast_inference: bool = False
 
     # Noise schedule (UMI: DDIM, 50 train steps, squaredcos_cap_v2, epsilon, clip_sample).
