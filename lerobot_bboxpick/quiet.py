@@ -21,6 +21,12 @@ def quiet_libraries() -> None:
         pass
     for name in ("datasets", "huggingface_hub", "lerobot.datasets", "torchcodec", "libav"):
         logging.getLogger(name).setLevel(logging.WARNING)
+    try:  # FFmpeg's own log (e.g. the MP4 muxer's "Starting second pass" when LeRobot copies videos)
+        import av
+
+        av.logging.set_level(av.logging.ERROR)
+    except (ImportError, AttributeError):
+        pass
 
 
 def redirect_native_output(log_file: str | Path) -> None:

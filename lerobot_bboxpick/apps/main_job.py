@@ -1,4 +1,4 @@
-"""The main job end to end: collect expert demos -> ``lerobot-train`` the CPU preset -> ``bboxpick-suite``.
+"""The main job end to end: collect expert demos -> ``lerobot-train`` bbox_diffusion -> ``bboxpick-suite``.
 
     lerobot_bboxpick run                  # quick profile: ~15 min on 2 cores, sized to this machine
     lerobot_bboxpick run --profile full   # the 90-minute CPU recipe and the full 6 x 30 suite
@@ -55,7 +55,7 @@ class Profile:
     videos: int  # rollout MP4s kept per setting
     bbox_mode: str = "mask"
     # Chunk steps executed before predicting again, and the augmented mask's centroid/size as extra
-    # conditioning (mask mode only): the cpu preset's choices, re-checked on validation seeds
+    # conditioning (mask mode only): the policy's defaults, re-checked on validation seeds
     # (docs/results.md).
     n_action_steps: int = 12
     mask_centroid: bool = True
@@ -230,7 +230,7 @@ def run_pipeline(profile_name: str = "quick", out_dir: Path = Path("outputs/main
     suffix = "" if profile.bbox_mode == "mask" else f"_{profile.bbox_mode}"
     train = out_dir / f"train{suffix}"
     precision = _precision(train, profile.use_amp)
-    print(f"[2/3] lerobot-train bbox_diffusion (cpu preset) -> {train}; precision: {precision.reason}")
+    print(f"[2/3] lerobot-train bbox_diffusion -> {train}; precision: {precision.reason}", flush=True)
     steps = _sized_steps(train)
     log = logs / f"train{suffix}.log"
     if steps is None:  # no sizing recorded yet: calibrate on the first steps of the real run

@@ -20,6 +20,7 @@ Only episodes the expert completes with outcome "pick" are kept unless ``--keep_
 every attempt is kept, labelled by its ``episode.outcome`` column, for offline RL).
 """
 
+import contextlib
 import json
 import logging
 import multiprocessing as mp
@@ -270,7 +271,9 @@ def collect(cfg: CollectConfig) -> dict:
                 progress.set_postfix(attempted=len(records))
     progress.close()
     quiet_libraries()
-    total = aggregate(cfg)
+    cfg.log_file.parent.mkdir(parents=True, exist_ok=True)
+    with open(cfg.log_file, "a") as log, contextlib.redirect_stderr(log):  # LeRobot's copy bars
+        total = aggregate(cfg)
     outcomes = {o: sum(r["outcome"] == o for r in records) for o in ("pick", "wrong", "contact", "empty")}
     summary = {"root": str(cfg.root), "episodes": total, "attempted": len(records), "outcomes": outcomes}
     if cfg.push_to_hub:

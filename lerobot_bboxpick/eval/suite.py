@@ -22,8 +22,10 @@ over), so a table never mixes checkpoints. Written into ``out_dir``:
 * ``videos/<policy>/<setting>_seed<seed>.mp4``: the first ``videos`` episodes per setting, bbox drawn
 """
 
+import contextlib
 import csv
 import hashlib
+import io
 import json
 import logging
 import math
@@ -185,7 +187,8 @@ def _runner(path: str, n_action_steps: int | None, env: Any) -> Any:
         return ExpertRunner(env)
     if path not in _POLICIES:
         _POLICIES.clear()  # one checkpoint in memory per worker at a time
-        _POLICIES[path] = PolicyRunner.from_pretrained(path, n_action_steps=n_action_steps)
+        with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights ..." per load
+            _POLICIES[path] = PolicyRunner.from_pretrained(path, n_action_steps=n_action_steps)
     return _POLICIES[path]
 
 
