@@ -56,7 +56,7 @@ def check_seeds_in_split(first: int, last: int, split: str, field: str = "seed_s
 
 def warn_unless_held_out(first: int, last: int, what: str = "the suite") -> bool:
     """Log a warning when seeds ``first..last`` reach into the training range; True if they do."""
-    if first < TRAIN_START + SPLITS["train"][1]:
+    if first < VALIDATION_START:  # the training range ends where validation begins
         log.warning(
             "%s uses seeds %d-%d, which overlap the %s seeds policies are trained on: "
             "report on test seeds (>= %d); choose recipes on validation seeds (%d-%d)",
