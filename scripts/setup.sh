@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Idempotent set-up, sourced by scripts/main.sh and scripts/test.sh:
-#   - Debian's Mesa EGL (headless MuJoCo rendering) and FFmpeg libraries (installed when missing and root),
+#   - Debian's Mesa EGL (headless MuJoCo rendering) and FFmpeg libraries, and Chromium for the dashboard's
+#     browser tests (installed when missing and root),
 #   - a Python 3.12 (on PATH, or pyenv's installed 3.12),
-#   - .venv with this project installed (editable, with the dev extras); re-installed only when
+#   - .venv with this project installed (editable, with the dev, ur5 and dashboard extras, which the
+#     tests need); re-installed only when
 #     pyproject.toml changed since the last install.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -22,17 +24,18 @@ quietly() {  # run a set-up step with its output in the log; show the log's tail
 # decoder (without them LeRobot falls back to PyAV with a long warning).
 system_libs_present() {
   ldconfig -p 2>/dev/null | grep -q "libEGL_mesa.so" && ldconfig -p | grep -q "libgbm.so" \
-    && ldconfig -p | grep -q "libavutil.so"
+    && ldconfig -p | grep -q "libavutil.so" && [ -x /usr/bin/chromium ]
 }
 if ! system_libs_present; then
   if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
-    echo "[setup] installing Debian packages: Mesa EGL (headless rendering), FFmpeg (video decoding); log: $SETUP_LOG"
+    echo "[setup] installing Debian packages: Mesa EGL (headless rendering), FFmpeg (video decoding)," \
+      "Chromium (dashboard tests); log: $SETUP_LOG"
     quietly apt-get update -qq
     quietly env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
-      libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg
+      libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg chromium
   else
     echo "[setup] WARNING: missing system libraries and not root:" \
-      "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg" >&2
+      "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 ffmpeg chromium" >&2
   fi
 fi
 
@@ -60,7 +63,7 @@ stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
 if [ ! -f "$stamp" ]; then
   echo "[setup] installing the project into .venv (pyproject.toml changed or first run: up to several GB and minutes); log: $SETUP_LOG"
   quietly .venv/bin/python -m pip install --upgrade pip
-  quietly .venv/bin/python -m pip install -e ".[dev]"
+  quietly .venv/bin/python -m pip install -e ".[dev,ur5,dashboard]"
   rm -f .venv/.installed-*
   touch "$stamp"
 fi

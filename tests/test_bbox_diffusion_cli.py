@@ -2,30 +2,23 @@
 lerobot-eval on the saved checkpoint, both in subprocesses."""
 
 import json
-import os
 import subprocess
 import sys
 from dataclasses import MISSING
 from pathlib import Path
 
 import pytest
+from helpers_cli import TINY_BBOX_DIFFUSION, cli_env
 
 BIN = Path(sys.executable).parent
-TINY = [  # a policy small enough to train a few steps in seconds on a CPU
-    "--policy.type=bbox_diffusion",
-    "--policy.device=cpu",
-    "--policy.backbone=resnet10t",
-    "--policy.image_size=64",
-    "--policy.down_dims=[32,64]",
-    "--policy.diffusion_step_embed_dim=32",
-    "--policy.num_inference_steps=4",
+TINY = [
+    *TINY_BBOX_DIFFUSION,
     "--policy.mask_centroid=true",  # the CPU recipe's option, so the CLI path covers it
     "--policy.use_amp=true",  # the recipe trains under bf16 autocast; lerobot-eval then evaluates under it
 ]
 
 
-def _env() -> dict:
-    return {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "2"}
+_env = cli_env
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,7 @@ the checkpoint)."""
 
 import numpy as np
 import torch
+from lerobot.configs import FeatureType, PolicyFeature
 from scipy.spatial.transform import Rotation
 
 from lerobot_bboxpick import geometry
@@ -71,3 +72,30 @@ def test_saved_pipelines_pass_absolute_actions_through(tmp_path):
     assert torch.equal(pre2({"observation.state": state})["observation.state"], state)
     action = _random_pose10(1, 6)
     assert torch.equal(post2(action), action)
+
+
+def test_a_robot_packed_state_is_split_into_pose_and_bbox():
+    """lerobot-record / lerobot-rollout pack the ur5's 14 scalars into observation.state: the step splits
+    them (pose10, then the box) and leaves the env's separate keys alone."""
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+    from lerobot_bboxpick.policies.bbox_diffusion.processor_bbox_diffusion import UnpackBboxFromStateStep
+
+    step = UnpackBboxFromStateStep()
+    packed = torch.arange(2 * 3 * 14, dtype=torch.float32).reshape(2, 3, 14)
+    out = step.observation({"observation.state": packed})
+    assert torch.equal(out["observation.state"], packed[..., :10])
+    assert torch.equal(out["observation.bbox"], packed[..., 10:])
+    separate = {"observation.state": packed[..., :10], "observation.bbox": torch.ones(2, 3, 4)}
+    out = step.observation(dict(separate))
+    assert torch.equal(out["observation.bbox"], torch.ones(2, 3, 4))
+    # The config reads a packed 14-float state feature as pose10 + bbox.
+    cfg = BboxDiffusionConfig(
+        input_features={
+            "observation.state": PolicyFeature(type=FeatureType.STATE, shape=(14,)),
+            "observation.images.wrist": PolicyFeature(type=FeatureType.VISUAL, shape=(3, 224, 224)),
+        },
+        output_features={"action": PolicyFeature(type=FeatureType.ACTION, shape=(10,))},
+    )
+    cfg.validate_features()
+    assert cfg.input_features["observation.state"].shape == (10,)
+    assert cfg.input_features["observation.bbox"].shape == (4,)

@@ -12,12 +12,14 @@ in the dataclass (and so in ``--help``):
 
 from dataclasses import dataclass, field
 
-from lerobot.configs import NormalizationMode, PreTrainedConfig
+from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
 from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
 
-from lerobot_bboxpick.keys import BBOX
+from lerobot_bboxpick.keys import BBOX, STATE
 
 BBOX_MODES = ("mask", "lowdim", "none")
+POSE_DIM = 10  # TCP pose10: position, rot6d, gripper width
+PACKED_STATE_DIM = POSE_DIM + 4  # the ur5 robot's observation.state: pose10 then the bbox
 
 
 @PreTrainedConfig.register_subclass("bbox_diffusion")
@@ -149,7 +151,17 @@ class BboxDiffusionConfig(PreTrainedConfig):
 
     def validate_features(self) -> None:
         """The policy needs the wrist image, the 10-float state, the bbox (unless bbox_mode='none')
-        and a 10-float action."""
+        and a 10-float action.
+
+        A 14-float state without a bbox feature is the ``ur5`` robot's packed layout (pose10 then the
+        bbox, as ``lerobot-record`` stores it): the features are split here and the preprocessor's
+        ``UnpackBboxFromStateStep`` splits the tensors, so such datasets train unchanged.
+        """
+        state = self.input_features.get(STATE)
+        if state is not None and state.shape == (PACKED_STATE_DIM,) and BBOX not in self.input_features:
+            self.input_features[STATE] = PolicyFeature(type=FeatureType.STATE, shape=(POSE_DIM,))
+            bbox_shape = (PACKED_STATE_DIM - POSE_DIM,)
+            self.input_features[BBOX] = PolicyFeature(type=FeatureType.STATE, shape=bbox_shape)
         if not self.image_features:
             raise ValueError("bbox_diffusion needs an image input feature (observation.images.*)")
         if self.robot_state_feature is None or self.robot_state_feature.shape != (10,):

@@ -1,0 +1,75 @@
+"""Q-reranking (paper section 4.2, item 1; IDQL's "sample N, keep argmax Q"): score candidate action
+chunks with the critic and keep the best one per state.
+
+``rerank_by_q`` is the core on state features and relative chunks; ``rerank_absolute`` takes the
+policy's absolute chunks and an observation batch; ``sample_and_rerank`` draws the candidates from a
+``bbox_diffusion`` policy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from lerobot_bboxpick.geometry import relative_pose10_torch
+from lerobot_bboxpick.keys import STATE
+
+
+@dataclass
+class RerankResult:
+    """The chosen chunk per state, its index among the candidates, and every candidate's score."""
+
+    best: Tensor  # (B, H, A)
+    index: Tensor  # (B,) long
+    scores: Tensor  # (B, N)
+
+
+@torch.no_grad()
+def rerank_by_q(q_fn: Callable[[Tensor, Tensor], Tensor], state: Tensor, candidates: Tensor) -> RerankResult:
+    """Argmax-Q candidate per state.
+
+    Args:
+        q_fn: ``(states (M, D), chunks (M, H, A)) -> (M,)`` scores, e.g. ``IqlCriticModel.q``.
+        state: ``(B, D)`` state features.
+        candidates: ``(B, N, H, A)`` chunks in ``q_fn``'s action space (relative chunks for the critic).
+    """
+    if candidates.ndim != 4 or state.ndim != 2 or candidates.shape[0] != state.shape[0]:
+        raise ValueError(
+            f"expected state (B, D) and candidates (B, N, H, A) with the same B, got "
+            f"{tuple(state.shape)} and {tuple(candidates.shape)}"
+        )
+    b, n = candidates.shape[:2]
+    scores = q_fn(state.repeat_interleave(n, dim=0), candidates.flatten(0, 1)).view(b, n)
+    index = scores.argmax(dim=1)
+    return RerankResult(best=candidates[torch.arange(b), index], index=index, scores=scores)
+
+
+@torch.no_grad()
+def rerank_absolute(critic, batch: dict[str, Tensor], candidates: Tensor) -> RerankResult:
+    """Rerank absolute chunks ``(B, N, H, 10)`` (what the policy returns) for observations ``batch``
+    (``(B, n_obs, ...)``, the policy's input); ``best`` is absolute too.
+
+    The observation is encoded once per state, not once per candidate.
+    """
+    state = critic.encode(batch)
+    current = batch[STATE][:, -1]  # the pose the critic's chunks are relative to
+    relative = relative_pose10_torch(candidates.float(), current[:, None].float())
+    result = rerank_by_q(critic.q, state, relative)
+    result.best = candidates[torch.arange(len(candidates)), result.index]
+    return result
+
+
+@torch.no_grad()
+def sample_and_rerank(
+    policy, critic, batch: dict[str, Tensor], n: int, generator: torch.Generator | None = None
+) -> RerankResult:
+    """Draw ``n`` chunks per observation from ``policy.predict_action_chunk`` and keep the argmax-Q one."""
+    if n < 1:
+        raise ValueError(f"n={n} must be >= 1")
+    b = batch[STATE].shape[0]
+    repeated = {k: v.repeat_interleave(n, dim=0) for k, v in batch.items() if isinstance(v, Tensor)}
+    chunks = policy.predict_action_chunk(repeated, generator=generator)
+    return rerank_absolute(critic, batch, chunks.view(b, n, *chunks.shape[1:]))

@@ -1,0 +1,1 @@
+"""LeRobot robots contributed by lerobot_bboxpick (``--robot.type=ur5``)."""

@@ -1,0 +1,1 @@
+"""LeRobot teleoperators contributed by lerobot_bboxpick (``--teleop.type=bboxpick_expert``)."""
