@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import queue
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -238,3 +239,65 @@ def test_robot_box_picker_returns_the_dragged_box(browser, reference: LegoPickEn
     box = result["box"]
     assert box.shape == (4,) and box.dtype == np.float32
     np.testing.assert_allclose(box, dragged, atol=1 / 224)
+
+
+def test_the_ur5_robot_takes_its_target_from_the_picker(browser) -> None:
+    """--robot.bbox_picker=web: a person drags a box around a brick on the robot's first frame; that
+    brick becomes the simulated robot's target and the first observation reports the dragged box."""
+    import socket
+
+    from lerobot.robots.utils import make_robot_from_config
+
+    from lerobot_bboxpick.robots.ur5 import UR5Config
+    from lerobot_bboxpick.robots.ur5.ur5 import BBOX_KEYS
+
+    with socket.socket() as s:  # a free port for the picker's page
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    probe = LegoPickEnv(setting="grid_id")
+    probe.reset(seed=0)
+    brick = _other_visible_brick(probe)
+    box = probe.brick_box(brick).bbox
+    probe.close()
+    seen: dict = {}
+
+    def robot_session() -> None:  # the robot lives in one thread: its EGL context is bound there
+        robot = make_robot_from_config(UR5Config(seed=0, bbox_picker="web", bbox_picker_port=port))
+        robot.connect()
+        try:
+            seen["target"] = robot.backend.env.target
+            obs = robot.get_observation()
+            seen["first_box"] = [obs[k] for k in BBOX_KEYS]
+        finally:
+            robot.disconnect()
+
+    errors: list = []
+    thread = threading.Thread(target=lambda: _run_collecting(robot_session, errors))
+    thread.start()
+    tab = browser.new_page(viewport=VIEWPORT)
+    try:
+        deadline = time.monotonic() + 60
+        while True:  # the robot builds its simulator before it serves the page
+            try:
+                tab.goto(f"http://127.0.0.1:{port}/")
+                break
+            except Exception:
+                assert time.monotonic() < deadline and thread.is_alive(), errors
+                time.sleep(0.5)
+        tab.wait_for_selector("body.mode-picker[data-ready=true]")
+        # A loose box, as a person draws it: 0.02 larger than the brick on every side.
+        dragged = _drag(tab, [box[0] - 0.02, box[1] - 0.02, box[2] + 0.02, box[3] + 0.02])
+        tab.click("#send-box")
+        thread.join(timeout=60)
+    finally:
+        tab.close()
+    assert not errors, errors
+    assert seen["target"] == brick, seen
+    np.testing.assert_allclose(seen["first_box"], dragged, atol=1 / 224)
+
+
+def _run_collecting(fn, errors: list) -> None:
+    try:
+        fn()
+    except Exception as e:  # handed to the test thread
+        errors.append(e)

@@ -252,3 +252,32 @@ def test_the_expert_needs_a_simulated_robot():
 def test_bad_config_names_the_field(kwargs, message):
     with pytest.raises(ValueError, match=message):
         UR5Config(**kwargs)
+
+
+def test_keyboard_deltas_become_the_absolute_pose_action(robot):
+    """LeRobot's end-effector teleoperators' deltas, through bboxpick-record-ee's processor, move the arm
+    by step_m per step along the table axes, and the dataset's action keys stay the ur5's pose10."""
+    from lerobot.datasets import aggregate_pipeline_dataset_features, create_initial_features
+
+    from lerobot_bboxpick.apps.record_ee import ee_teleop_action_processor
+
+    pipeline = ee_teleop_action_processor(step_m=0.01)
+    features = aggregate_pipeline_dataset_features(
+        pipeline=pipeline, initial_features=create_initial_features(action=robot.action_features)
+    )
+    assert features["action"]["names"] == list(POSE_KEYS)
+    obs = robot.get_observation()
+    start = _pose10(obs)
+    action = pipeline(({"delta_x": 1.0, "delta_y": 0.0, "delta_z": -1.0, "gripper": 0.0}, obs))
+    np.testing.assert_allclose(
+        np.array([action[k] for k in POSE_KEYS]) - start, [0.01, 0, -0.01, *[0] * 6, -0.005]
+    )
+    for _ in range(10):
+        robot.send_action(pipeline(({"delta_x": 1.0, "delta_y": 0.0, "delta_z": 0.0, "gripper": 1.0}, obs)))
+        obs = robot.get_observation()
+    moved = _pose10(obs) - start
+    assert moved[0] == pytest.approx(0.10, abs=0.01) and abs(moved[1]) < 0.01  # the arm lags its targets
+    with pytest.raises(
+        ValueError, match=r"takes \['delta_x', 'delta_y', 'delta_z'\] and 'gripper', got \['x'\]"
+    ):
+        pipeline(({"x": 1.0}, obs))

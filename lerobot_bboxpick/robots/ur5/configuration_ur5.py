@@ -38,6 +38,8 @@ class UR5Config(RobotConfig):
     bbox: str | None = None
     # "web": drag the box on the first frame in a browser page (the dashboard's picker); "none".
     bbox_picker: str = "none"
+    # Port of the web picker's page on this machine (0: any free port); its URL is printed.
+    bbox_picker_port: int = 0
     # Where observation.bbox comes from after the first frame: "tracked" (the colour tracker follows the
     # first box; the only choice on a real arm) or "oracle" (simulator only: the target's projected box
     # every frame, exactly as bboxpick-collect records it).

@@ -118,22 +118,30 @@ class MujocoArm(ArmBackend):
         assert self.observation is not None
         return np.asarray(self.observation["bbox"], dtype=np.float32)
 
-    def designate(self, bbox: np.ndarray, min_iou: float = 0.3) -> int:
+    def designate(self, bbox: np.ndarray, min_covered: float = 0.5) -> int:
         """Make the brick that best matches ``bbox`` (normalised, in the current image) the target.
 
-        The scene is reloaded with that target (same seed, so the same bricks); returns its index.
-        Raises ValueError naming robot.bbox when no brick overlaps the box by ``min_iou``.
+        A person's box is often loose around a small brick, so the candidates are the bricks with at
+        least ``min_covered`` of their own box inside it, and the best IoU among them wins. The scene is
+        reloaded with that target (same seed, so the same bricks); returns its index. Raises ValueError
+        naming robot.bbox when no brick is covered enough.
         """
         from lerobot_bboxpick.data.tracking import bbox_iou
         from lerobot_bboxpick.sim.scene import N_BRICKS
 
         env = self._live()
-        ious = np.array([float(bbox_iou(env.brick_box(i).bbox, bbox)) for i in range(N_BRICKS)])
+        boxes = np.array([env.brick_box(i).bbox for i in range(N_BRICKS)], dtype=np.float64)
+        ious = bbox_iou(boxes, bbox)
+        inside = np.clip(np.minimum(boxes[:, 2:], bbox[2:]) - np.maximum(boxes[:, :2], bbox[:2]), 0, None)
+        areas = np.prod(boxes[:, 2:] - boxes[:, :2], axis=1)
+        covered = np.where(areas > 0, np.prod(inside, axis=1) / np.where(areas > 0, areas, 1.0), 0.0)
+        ious = np.where(covered >= min_covered, ious, -1.0)
         best = int(np.argmax(ious))
-        if ious[best] < min_iou:
+        if ious[best] < 0:
             raise ValueError(
                 f"robot.bbox={np.round(bbox, 3).tolist()} covers no brick of scene {self.scene_index} "
-                f"(best IoU {ious[best]:.2f} < {min_iou}); draw it around one brick"
+                f"(at most {covered.max():.0%} of one is inside it; {min_covered:.0%} needed): draw it "
+                "around one brick"
             )
         self._target_override = best
         self._load_scene(self.scene_index, keep_target=True)

@@ -194,7 +194,7 @@ class UR5(Robot):
         elif self.config.bbox_picker == "web":
             from lerobot_bboxpick.apps.dashboard.box_picker import pick_box_in_browser
 
-            box = pick_box_in_browser(self._frame())
+            box = pick_box_in_browser(self._frame(), port=self.config.bbox_picker_port)
         if self.config.backend == "mujoco":
             if box is not None:
                 brick = backend.designate(box)
