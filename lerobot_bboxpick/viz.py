@@ -90,3 +90,42 @@ def outcome_bars(rows: list[dict], outcomes: tuple[str, ...], path: Path) -> Pat
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def outcome_stats_figure(episodes: list[dict], outcomes: tuple[str, ...], path: Path) -> Path:
+    """A dataset's statistics (the paper's figure 6): episodes per outcome in each setting (left) and the
+    histogram of episode lengths per outcome (right). ``episodes``: dicts with setting, outcome, length."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    settings = list(dict.fromkeys(e["setting"] for e in episodes))
+    shown = [o for o in (*outcomes, "unknown") if any(e["outcome"] == o for e in episodes)]
+    fig, (bars, hist) = plt.subplots(1, 2, figsize=(11, 3.8))
+    x = np.arange(len(settings))
+    width = 0.8 / max(1, len(shown))
+    lengths = [e["length"] for e in episodes]
+    bins = np.linspace(0, max(lengths, default=1), 21)
+    for i, outcome in enumerate(shown):
+        counts = [sum(e["setting"] == s and e["outcome"] == outcome for e in episodes) for s in settings]
+        offset = (i - (len(shown) - 1) / 2) * width
+        drawn = bars.bar(x + offset, counts, width, label=outcome)
+        bars.bar_label(drawn, fontsize=7)
+        mine = [e["length"] for e in episodes if e["outcome"] == outcome]
+        hist.hist(mine, bins=bins, histtype="step", linewidth=1.5, label=f"{outcome} (n={len(mine)})")
+    bars.set_xticks(x, settings, rotation=35, ha="right", fontsize=8)
+    bars.set_ylabel("episodes")
+    bars.set_title(f"Episodes per outcome and setting ({len(episodes)} episodes)")
+    hist.set_xlabel("episode length (steps)")
+    hist.set_ylabel("episodes")
+    hist.set_title("Episode length per outcome")
+    for ax in (bars, hist):
+        ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path

@@ -25,8 +25,10 @@ import json
 import logging
 import multiprocessing as mp
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import draccus
 import numpy as np
@@ -100,6 +102,40 @@ class CollectConfig:
         return self.setting_list[seed % len(self.setting_list)]
 
 
+class EpisodeRecorder:
+    """What a shard worker runs for each seed: ``bboxpick-collect``'s scripted expert, or a policy.
+
+    A recorder goes to spawned worker processes, so it must pickle (a module-level dataclass does).
+    """
+
+    # Facts that decide the recorded episodes (e.g. a checkpoint's weights), written with every seed's
+    # record in ``seeds.json`` so that a resumed run can refuse to mix two kinds; None: nothing to check.
+    run_key: dict | None = None
+
+    def make_env(self, setting: str) -> Any:
+        """A new env of ``setting`` (one per setting and worker, reused for every seed)."""
+        raise NotImplementedError
+
+    def __call__(self, env: Any, seed: int) -> tuple[list[dict], str]:
+        """Record the episode of ``seed`` on ``env``: its ``make_frame`` dicts and its outcome."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class ExpertRecorder(EpisodeRecorder):
+    """The scripted expert, run until its plan is done (it carries the brick away after the pick)."""
+
+    def make_env(self, setting: str) -> Any:
+        """An env that keeps running after a lift, so the expert's plan completes."""
+        from lerobot_bboxpick.sim.env import LegoPickEnv
+
+        return LegoPickEnv(setting=setting, terminate_on_lift=False)
+
+    def __call__(self, env: Any, seed: int) -> tuple[list[dict], str]:
+        """``record_episode`` of the expert."""
+        return record_episode(env, seed)
+
+
 @dataclass(frozen=True)
 class ShardTask:
     """One worker job: record ``seeds`` into ``path``."""
@@ -110,6 +146,36 @@ class ShardTask:
     repo_id: str
     keep_failed: bool
     log_file: Path | None = None
+    recorder: EpisodeRecorder = ExpertRecorder()
+
+
+def step_frame(obs: dict, info: dict, action: np.ndarray, reward: float, next_info: dict) -> dict:
+    """Frame ``t`` of an episode: the observation before step ``t`` (``obs``, ``info``), the action
+    executed at step ``t``, and that step's reward and success (``next_info``). ``next.done`` and
+    ``episode.outcome`` are set by ``close_episode`` once the episode is over."""
+    return make_frame(
+        obs["pixels"]["wrist"],
+        obs["agent_pos"],
+        obs["bbox"],
+        action,
+        info["task"],
+        reward=reward,
+        done=False,
+        success=next_info["is_success"],
+        seed=info["seed"],
+        setting=info["setting"],
+        target=info["target"],
+    )
+
+
+def close_episode(frames: list[dict], outcome: str) -> tuple[list[dict], str]:
+    """Mark the last frame done and label every frame with the episode's ``outcome``; return both."""
+    if not frames:
+        raise ValueError("an episode needs at least one frame (one env step)")
+    frames[-1]["next.done"][:] = True
+    for f in frames:  # the outcome is known once the episode is over
+        f[EPISODE_OUTCOME][:] = outcome_code(outcome)
+    return frames, outcome
 
 
 def record_episode(
@@ -129,35 +195,17 @@ def record_episode(
     while not expert.done:
         action = expert.act()
         next_obs, reward, terminated, truncated, next_info = env.step(action)
-        frames.append(
-            make_frame(
-                obs["pixels"]["wrist"],
-                obs["agent_pos"],
-                obs["bbox"],
-                action,
-                info["task"],
-                reward=reward,
-                done=False,
-                success=next_info["is_success"],
-                seed=seed,
-                setting=info["setting"],
-                target=info["target"],
-            )
-        )
+        frames.append(step_frame(obs, info, action, reward, next_info))
         obs, info = next_obs, next_info
         if terminated or truncated:
             break
-    frames[-1]["next.done"][:] = True
-    for f in frames:  # the outcome is known once the episode is over
-        f[EPISODE_OUTCOME][:] = outcome_code(info["outcome"])
-    return frames, info["outcome"]
+    return close_episode(frames, info["outcome"])
 
 
 def record_shard(task: ShardTask) -> list[dict]:
-    """Worker: record a shard; returns one record per attempted seed."""
+    """Worker: record a shard with ``task.recorder``; returns one record per attempted seed."""
 
     import lerobot_bboxpick  # noqa: F401  (MUJOCO_GL before mujoco, in spawned workers too)
-    from lerobot_bboxpick.sim.env import LegoPickEnv
 
     if task.log_file is not None:
         redirect_native_output(task.log_file)
@@ -165,12 +213,12 @@ def record_shard(task: ShardTask) -> list[dict]:
     partial = task.path.with_name(task.path.name + ".partial")
     shutil.rmtree(partial, ignore_errors=True)
     dataset = None
-    envs: dict[str, LegoPickEnv] = {}
+    envs: dict[str, Any] = {}
     records = []
     for seed, setting in zip(task.seeds, task.settings, strict=True):
         if setting not in envs:
-            envs[setting] = LegoPickEnv(setting=setting, terminate_on_lift=False)
-        frames, outcome = record_episode(envs[setting], seed)
+            envs[setting] = task.recorder.make_env(setting)
+        frames, outcome = task.recorder(envs[setting], seed)
         kept = task.keep_failed or outcome == "pick"
         if kept:
             if dataset is None:
@@ -178,9 +226,10 @@ def record_shard(task: ShardTask) -> list[dict]:
             for frame in frames:
                 dataset.add_frame(frame)
             dataset.save_episode()
-        records.append(
-            {"seed": seed, "setting": setting, "outcome": outcome, "kept": kept, "frames": len(frames)}
-        )
+        record = {"seed": seed, "setting": setting, "outcome": outcome, "kept": kept, "frames": len(frames)}
+        if task.recorder.run_key is not None:
+            record["run_key"] = task.recorder.run_key
+        records.append(record)
     for env in envs.values():
         env.close()
     if dataset is not None:
@@ -204,30 +253,44 @@ def attempted(work_dir: Path) -> list[dict]:
     return [r for shard in finished_shards(work_dir) for r in json.loads((shard / "seeds.json").read_text())]
 
 
-def aggregate(cfg: CollectConfig) -> int:
-    """Rebuild ``root`` from the finished shards with LeRobot's aggregation; returns the episode count."""
+def aggregate_roots(repo_id: str, roots: Sequence[Path], dest: Path) -> int:
+    """LeRobot's ``aggregate_datasets`` of the datasets at ``roots`` (in that order) into ``dest``, built in
+    a temporary folder and swapped in whole; returns the episode count."""
     from lerobot.datasets.aggregate import aggregate_datasets
 
-    shards = [s for s in finished_shards(cfg.work_dir) if (s / "meta" / "info.json").exists()]
-    if not shards:
-        raise RuntimeError(f"no episode was kept in {cfg.work_dir}; nothing to aggregate")
-    tmp = cfg.root.with_name(cfg.root.name + ".tmp")
+    tmp = dest.with_name(dest.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     aggregate_datasets(
-        repo_ids=[cfg.repo_id] * len(shards), roots=shards, aggr_repo_id=cfg.repo_id, aggr_root=tmp
+        repo_ids=[repo_id] * len(roots), roots=list(roots), aggr_repo_id=repo_id, aggr_root=tmp
     )
-    old = cfg.root.with_name(cfg.root.name + ".old")
+    old = dest.with_name(dest.name + ".old")
     shutil.rmtree(old, ignore_errors=True)
-    if cfg.root.exists():
-        cfg.root.rename(old)
-    tmp.rename(cfg.root)
+    if dest.exists():
+        dest.rename(old)
+    tmp.rename(dest)
     shutil.rmtree(old, ignore_errors=True)
-    info = json.loads((cfg.root / "meta" / "info.json").read_text())
+    info = json.loads((dest / "meta" / "info.json").read_text())
     return int(info["total_episodes"])
 
 
-def collect(cfg: CollectConfig) -> dict:
-    """Collect until ``cfg.episodes`` episodes are kept; returns a summary."""
+def aggregate(cfg: CollectConfig, merge_with: Sequence[Path] = ()) -> int:
+    """Rebuild ``root`` from the datasets ``merge_with`` (first) and the finished shards with LeRobot's
+    aggregation; returns the episode count."""
+    shards = [s for s in finished_shards(cfg.work_dir) if (s / "meta" / "info.json").exists()]
+    if not shards:
+        raise RuntimeError(f"no episode was kept in {cfg.work_dir}; nothing to aggregate")
+    return aggregate_roots(cfg.repo_id, [*merge_with, *shards], cfg.root)
+
+
+def collect(
+    cfg: CollectConfig, recorder: EpisodeRecorder | None = None, merge_with: Sequence[Path] = ()
+) -> dict:
+    """Collect until ``cfg.episodes`` episodes are kept; returns a summary.
+
+    ``recorder`` records each seed (default: the scripted expert, ``ExpertRecorder``); the datasets at
+    ``merge_with`` are aggregated into ``root`` before the recorded episodes.
+    """
+    recorder = recorder or ExpertRecorder()
     if cfg.root.exists() and not cfg.resume:
         raise FileExistsError(
             f"root={cfg.root} already exists; pass --resume=true to continue that collection "
@@ -260,6 +323,7 @@ def collect(cfg: CollectConfig) -> dict:
                     repo_id=cfg.repo_id,
                     keep_failed=cfg.keep_failed,
                     log_file=cfg.log_file,
+                    recorder=recorder,
                 )
                 for chunk in (batch[i : i + cfg.shard_size] for i in range(0, len(batch), cfg.shard_size))
             ]
@@ -273,7 +337,7 @@ def collect(cfg: CollectConfig) -> dict:
     quiet_libraries()
     cfg.log_file.parent.mkdir(parents=True, exist_ok=True)
     with open(cfg.log_file, "a") as log, contextlib.redirect_stderr(log):  # LeRobot's copy bars
-        total = aggregate(cfg)
+        total = aggregate(cfg, merge_with)
     outcomes = {o: sum(r["outcome"] == o for r in records) for o in ("pick", "wrong", "contact", "empty")}
     summary = {"root": str(cfg.root), "episodes": total, "attempted": len(records), "outcomes": outcomes}
     if cfg.push_to_hub:

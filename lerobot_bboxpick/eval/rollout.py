@@ -7,6 +7,7 @@ checkpoint's saved preprocessor, the policy, and its saved postprocessor; so wha
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -91,6 +92,11 @@ class ExpertRunner:
         return self.expert.act()
 
 
+# Called after every env step with (observation before the step, its info, the action executed, the step's
+# reward, the info after the step): what a recorder needs to write frame t.
+StepHook = Callable[[dict, dict, np.ndarray, float, dict], None]
+
+
 def _batched(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: _batched(v) for k, v in value.items()}
@@ -107,11 +113,13 @@ def rollout(
     env: Any | None = None,
     options: dict | None = None,
     bbox_source: BboxSource | None = None,
+    on_step: StepHook | None = None,
 ) -> dict:
     """Run one episode; returns outcome, steps and the final gripper-to-target distance.
 
     ``bbox_source`` decides the bbox the policy sees (default: the oracle box); videos draw the
-    oracle box in white and, when they differ, the given box in yellow.
+    oracle box in white and, when they differ, the given box in yellow. ``on_step`` sees every step
+    (``bboxpick-rollouts`` records the episode through it).
     """
     from lerobot_bboxpick.sim.env import LegoPickEnv
     from lerobot_bboxpick.viz import draw_bbox, save_mp4
@@ -134,8 +142,11 @@ def rollout(
     steps = 0
     done = False
     while not done:
-        obs, _, terminated, truncated, info = env.step(runner.act(obs, info["task"]))
-        obs = source(obs)
+        action = runner.act(obs, info["task"])
+        next_obs, reward, terminated, truncated, next_info = env.step(action)
+        if on_step is not None:
+            on_step(obs, info, action, float(reward), next_info)
+        obs, info = source(next_obs), next_info
         steps += 1
         done = terminated or truncated
         if video_path:

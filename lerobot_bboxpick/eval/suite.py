@@ -180,7 +180,8 @@ _POLICIES: dict[str, Any] = {}
 _ENVS: dict[tuple[str, int], Any] = {}
 
 
-def _runner(path: str, n_action_steps: int | None, env: Any) -> Any:
+def load_runner(path: str, n_action_steps: int | None, env: Any) -> Any:
+    """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept."""
     from lerobot_bboxpick.eval.rollout import ExpertRunner, PolicyRunner
 
     if path == EXPERT:
@@ -210,7 +211,7 @@ def run_episode(task: dict) -> dict:
     from lerobot_bboxpick.eval.bbox_source import BboxSource
 
     env = _env(task["setting"], task["max_steps"])
-    runner = _runner(task["path"], task.get("n_action_steps"), env)
+    runner = load_runner(task["path"], task.get("n_action_steps"), env)
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
     source = BboxSource(task["run_key"]["bbox_source"], task["run_key"].get("noisy_iou", DEFAULT_NOISY_IOU))
