@@ -108,3 +108,22 @@ def test_quick_training_is_sized_by_its_time_budget_and_full_by_its_samples():
     m = _STEP_LINE.search(line)
     assert _parse_count(m.group(1)) == 1000 and float(m.group(2)) + float(m.group(3)) == 0.425
     assert _parse_count("1.2K") == 1200 and _parse_count("40") == 40
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("script", "option"),
+    [
+        ("bboxpick-collect", "--keep_failed"),
+        ("bboxpick-rollouts", "--merge_with"),
+        ("bboxpick-suite", "--bbox_source"),
+        ("bboxpick-train-critic", "--policy_path"),
+        ("bboxpick-verify-critic", "--max_states"),
+        ("bboxpick-dashboard", "--checkpoints_dir"),
+    ],
+)
+def test_every_command_prints_its_help(script, option):
+    """--help lists the options (argparse formats help strings with %, so a stray % breaks it)."""
+    result = subprocess.run([BIN / script, "--help"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert option in result.stdout
