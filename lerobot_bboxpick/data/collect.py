@@ -54,7 +54,8 @@ class CollectConfig:
 
     repo_id: str = "local/lego_pick_expert"
     root: Path = Path("outputs/datasets/lego_pick_expert")
-    # Comma-separated settings; episode seeds cycle through them (the seed modulo their count picks the setting).
+    # Comma-separated settings; episode seeds cycle through them
+    # (the seed modulo their count picks the setting).
     settings: str = "grid_id"
     # Episodes to end up with in the dataset (kept ones).
     episodes: int = 50

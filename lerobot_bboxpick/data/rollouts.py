@@ -68,7 +68,8 @@ class RolloutsConfig:
     policy_path: Path | None = None
     repo_id: str = "local/lego_pick_rollouts"
     root: Path = Path("outputs/datasets/lego_pick_rollouts")
-    # Comma-separated settings; episode seeds cycle through them (the seed modulo their count picks the setting).
+    # Comma-separated settings; episode seeds cycle through them
+    # (the seed modulo their count picks the setting).
     settings: str = ",".join(SETTINGS)
     # Episodes per setting (all kept, whatever their outcome).
     episodes: int = 10
