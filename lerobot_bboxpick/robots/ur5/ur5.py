@@ -153,7 +153,7 @@ class UR5(Robot):
         T, width = pose10_to_target(a)
         dt = 1.0 / self.config.fps
         T_from = self._T_sent if self._T_sent is not None else backend.tcp_pose()
-        T, limited = self.config.safety.limit_velocity(T_from, T, dt, self._v_sent)
+        T, _ = self.config.safety.limit_velocity(T_from, T, dt, self._v_sent)
         backend.command(T, width)
         self._v_sent = (T[:3, 3] - T_from[:3, 3]) / dt
         self._T_sent = T
@@ -189,20 +189,24 @@ class UR5(Robot):
         self._halted = False
         self._T_sent = self._v_sent = None
         box = None
+        # The tracker starts on the very frame the box was drawn on: on a real arm a later frame may
+        # already show the scene moved.
+        frame = self._frame()
         if self.config.bbox is not None:
             box = np.array(parse_bbox(self.config.bbox), dtype=np.float32)
         elif self.config.bbox_picker == "web":
             from lerobot_bboxpick.apps.dashboard.box_picker import pick_box_in_browser
 
-            box = pick_box_in_browser(self._frame(), port=self.config.bbox_picker_port)
+            box = pick_box_in_browser(frame, port=self.config.bbox_picker_port)
         if self.config.backend == "mujoco":
             if box is not None:
                 brick = backend.designate(box)
                 log.info("target: brick %d (the one under the box)", brick)
+                frame = self._frame()  # the scene was reloaded with that target (same seed, same image)
             else:
                 box = backend.oracle_bbox()
         assert box is not None
-        self.prompt.start(self._frame(), box)
+        self.prompt.start(frame, box)
 
     @staticmethod
     def _as_action(T: np.ndarray, width: float) -> dict[str, float]:
