@@ -57,6 +57,23 @@ def draw_bbox(
     return image
 
 
+THUMBNAIL_PX = 112  # side of the final-frame thumbnails in outcome sheets
+
+
+def outcome_sheet(tiles: list[tuple[np.ndarray, str, str]], columns: int = 8) -> np.ndarray:
+    """Contact sheet of episode thumbnails, each labelled with its caption and framed in its outcome's
+    colour (pick green, wrong red, contact orange, empty grey): ``tiles`` is (image, caption, outcome)."""
+    colors = {"pick": (40, 200, 60), "wrong": (230, 40, 40), "contact": (255, 150, 0)}
+    framed = []
+    for image, caption, outcome in tiles:
+        tile = cv2.resize(image, (THUMBNAIL_PX, THUMBNAIL_PX), interpolation=cv2.INTER_AREA)
+        tile = cv2.copyMakeBorder(
+            tile, 3, 3, 3, 3, cv2.BORDER_CONSTANT, value=colors.get(outcome, (120,) * 3)
+        )
+        framed.append(label(tile, caption))
+    return contact_sheet(framed, columns=min(columns, len(framed)))
+
+
 def outcome_bars(rows: list[dict], outcomes: tuple[str, ...], path: Path) -> Path:
     """Grouped bars: one panel per outcome, settings on the x axis, one bar per policy, Wilson error bars."""
     import matplotlib

@@ -3,7 +3,7 @@
 #   - Debian's Mesa EGL (headless MuJoCo rendering) and FFmpeg libraries, and Chromium for the dashboard's
 #     browser tests (installed when missing and root),
 #   - a Python 3.12 (on PATH, or pyenv's installed 3.12),
-#   - .venv with this project installed (editable, with the dev, ur5 and dashboard extras, which the
+#   - .venv with this project installed (editable, with the dev, ur5, dashboard and ray extras, which the
 #     tests need); re-installed only when
 #     pyproject.toml changed since the last install.
 set -euo pipefail
@@ -63,7 +63,7 @@ stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
 if [ ! -f "$stamp" ]; then
   echo "[setup] installing the project into .venv (pyproject.toml changed or first run: up to several GB and minutes); log: $SETUP_LOG"
   quietly .venv/bin/python -m pip install --upgrade pip
-  quietly .venv/bin/python -m pip install -e ".[dev,ur5,dashboard]"
+  quietly .venv/bin/python -m pip install -e ".[dev,ur5,dashboard,ray]"
   rm -f .venv/.installed-*
   touch "$stamp"
 fi

@@ -101,3 +101,16 @@ def test_autocast_keeps_pose_and_mask_conditioning_in_float32():
     assert abs(lowdim_ref[0, 0, 0].item() - 0.0013 / model.config.obs_position_scale) < 1e-4
     feats_ref, feats_amp = per_step[..., :width], amp.view(2, 2, -1)[..., :width]
     assert (feats_amp - feats_ref).abs().max() < 0.05 * feats_ref.abs().max()
+
+
+def test_one_observed_step_trains_on_lerobot_dataset_shapes():
+    """With n_obs_steps=1 LeRobotDataset squeezes the video frame's time axis but keeps the state's and
+    the bbox's ((B, 3, H, W) beside (B, 1, 10)): the loss is the one of the explicit (B, 1, ...) batch."""
+    policy = _policy(n_obs_steps=1, image_size=64).train()
+    full = {k: v[:, -1:] for k, v in _batch(3).items()}
+    full["action"] = torch.rand(3, 16, 10, generator=torch.Generator().manual_seed(2))
+    squeezed = {**full, "observation.images.wrist": full["observation.images.wrist"][:, 0]}
+    torch.manual_seed(5)
+    expected = policy.forward(full)[0]
+    torch.manual_seed(5)
+    assert torch.allclose(policy.forward(squeezed)[0], expected)

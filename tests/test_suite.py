@@ -71,6 +71,15 @@ def test_expert_suite_picks_writes_consistent_reports_and_resumes(tmp_path: Path
     assert text.count("| expert |") == len(SETTINGS) and "Wilson" in text
     assert (out / "outcomes.png").stat().st_size > 10_000
     assert len(list((out / "videos" / "expert").glob("*.mp4"))) == len(SETTINGS)
+    # The outcome sheet: one 118 px framed thumbnail per episode (8 per row), green frames for picks.
+    import cv2
+
+    sheet = cv2.imread(str(out / "outcomes_expert.png"))[..., ::-1]
+    assert sheet.shape == (2 * 118, 8 * 118, 3)
+    for i, r in enumerate(sorted(records, key=lambda r: (r["setting"], r["seed"]))):
+        row, col = divmod(i, 8)
+        corner = sheet[row * 118 + 1, col * 118 + 1]
+        assert (corner[1] > 150 and corner[0] < 100) == (r["outcome"] == "pick"), (i, r["outcome"], corner)
 
     # Re-running the same suite reproduces it: a third episode per setting is added, the first two kept.
     (out / "episodes.jsonl").write_text((out / "episodes.jsonl").read_text() + '{"torn": ')
@@ -139,6 +148,8 @@ def test_bad_options_name_the_field(tmp_path: Path) -> None:
         SuiteConfig(settings="grid_idd", out_dir=tmp_path)
     with pytest.raises(ValueError, match="episodes"):
         SuiteConfig(episodes=0, out_dir=tmp_path)
+    with pytest.raises(ValueError, match="num_inference_steps=0 must be an integer >= 1"):
+        SuiteConfig(num_inference_steps=0, out_dir=tmp_path)
     with pytest.raises(ValueError, match="checkpoint folder"):
         SuiteConfig(policies=str(tmp_path / "missing"), out_dir=tmp_path)
     result = subprocess.run(
@@ -182,6 +193,8 @@ def test_resume_is_refused_after_the_checkpoint_weights_change(tmp_path: Path) -
     assert read_episodes(out / "episodes.jsonl") == first  # the refused run changed nothing
     with pytest.raises(ValueError, match="n_action_steps"):
         run_suite(cfg(n_action_steps=8))
+    with pytest.raises(ValueError, match="num_inference_steps"):
+        run_suite(cfg(num_inference_steps=4))
 
     run_suite(cfg(fresh=True))  # asked for: the old episodes move aside, the new run starts over
     now = read_episodes(out / "episodes.jsonl")

@@ -189,6 +189,61 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
     return "\n".join(lines)
 
 
+# Inference-speed levers, each a set of bbox_diffusion config overrides timed beside the preset in one run
+# (docs/benchmarks.md holds their pick rates on validation seeds).
+INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
+    "preset (96 px, 2 obs, 16 DDIM steps)": {},
+    "8 DDIM steps": {"num_inference_steps": 8},
+    "4 DDIM steps": {"num_inference_steps": 4},
+    "half-width UNet (32, 64, 128)": {"down_dims": (32, 64, 128)},
+    "64 px, 1 observed frame": {"image_size": 64, "n_obs_steps": 1},
+    "64 px, 1 frame, 8 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 8},
+    "64 px, 1 frame, 4 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 4},
+}
+
+
+def bench_inference_levers(chunks: int = 12, threads: int | None = None) -> str:
+    """Markdown table: ms per predicted chunk (encoder + denoising, float32 as evaluation runs) of each
+    ``INFERENCE_LEVERS`` entry, timed in one run, with its ratio to the preset; ``threads`` sets torch's
+    thread count (None: torch's default)."""
+    import torch
+
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+    from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+
+    if threads is not None:
+        torch.set_num_threads(threads)
+    inputs, outputs = _policy_features()
+    obs = {
+        "observation.images.wrist": torch.rand(1, 3, 224, 224),
+        "observation.state": torch.rand(1, 10),
+        "observation.bbox": torch.tensor([[0.4, 0.4, 0.5, 0.5]]),
+    }
+    times = {}
+    for name, overrides in INFERENCE_LEVERS.items():
+        torch.manual_seed(0)
+        config = BboxDiffusionConfig(
+            device="cpu", input_features=inputs, output_features=outputs, **overrides
+        )
+        policy = BboxDiffusionPolicy(config).eval()
+        samples = []
+        with torch.no_grad():
+            for _ in range(chunks + 2):  # the first two trace and warm up the UNet
+                policy.reset()
+                t0 = time.perf_counter()
+                policy.select_action(dict(obs))  # empty queue: a full chunk
+                samples.append(time.perf_counter() - t0)
+        times[name] = 1000 * float(np.median(samples[2:]))
+    base = times[next(iter(INFERENCE_LEVERS))]
+    lines = [
+        f"| inference lever (float32, {torch.get_num_threads()} torch threads) | ms per 16-step chunk "
+        "| ratio to the preset |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {name} | {ms:.1f} | {ms / base:.2f}x |" for name, ms in times.items()]
+    return "\n".join(lines)
+
+
 def bench_collect(episodes: int = 6, settings: str = "grid_id") -> str:
     """Markdown table: expert episodes/min and frames/s written by bboxpick-collect with 1 and 2 workers
     (same seeds, fresh temporary datasets; includes video encoding and the final aggregation)."""

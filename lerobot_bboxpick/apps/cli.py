@@ -29,7 +29,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="lerobot_bboxpick", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="the main job: collect expert demos, lerobot-train, bboxpick-suite")
-    run.add_argument("--profile", choices=("quick", "full"), default="quick")
+    run.add_argument(
+        "--profile",
+        choices=("quick", "full", "practical"),
+        default="quick",
+        help="quick: the 15-minute first run; full: the paper protocol (grid demos); practical: every layout",
+    )
     run.add_argument("--out-dir", type=Path, default=Path("outputs/main"))
     run.add_argument("--bbox-mode", choices=("mask", "lowdim", "none"), default="mask", help="ablations")
     run.add_argument(
@@ -52,21 +57,24 @@ def main(argv: list[str] | None = None) -> int:
         "--collect", action="store_true", help="also time bboxpick-collect with 1 and 2 workers"
     )
     bench.add_argument("--suite", action="store_true", help="also time bboxpick-suite on a CPU-preset policy")
-    bench.add_argument("--all", action="store_true", help="--policies --collect --suite")
+    bench.add_argument(
+        "--inference", action="store_true", help="also time the inference levers (ms per chunk) side by side"
+    )
+    bench.add_argument("--all", action="store_true", help="--policies --inference --collect --suite")
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
     sheet.add_argument("--out", type=Path, default=Path("examples/settings_contact_sheet.png"))
     sheet.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
 
     if args.command == "run":
-        from lerobot_bboxpick.apps.main_job import run_pipeline
+        from lerobot_bboxpick.apps.main_job import run_pipeline, what_next
 
         overrides = {"bbox_mode": args.bbox_mode}
         if args.amp is not None:
             overrides["use_amp"] = args.amp
         table = run_pipeline(args.profile, args.out_dir, **overrides)
         print(table.read_text())
-        print(f"report (table, bar chart, per-episode JSONL, videos) in {table.parent.resolve()}")
+        print(what_next(table, table.parent.parent / "train" / "checkpoints" / "last" / "pretrained_model"))
     elif args.command == "demo":
         from lerobot_bboxpick.apps.demo import run_demo
 
@@ -78,11 +86,15 @@ def main(argv: list[str] | None = None) -> int:
 
         table = bench_table(args.settings, steps=args.steps)
         if args.all:
-            args.policies = args.collect = args.suite = True
+            args.policies = args.inference = args.collect = args.suite = True
         if args.policies:
             from lerobot_bboxpick.apps.bench import bench_policies
 
             table += "\n\n" + bench_policies()
+        if args.inference:
+            from lerobot_bboxpick.apps.bench import bench_inference_levers
+
+            table += "\n\n" + bench_inference_levers()
         if args.collect:
             from lerobot_bboxpick.apps.bench import bench_collect
 

@@ -3,6 +3,7 @@
     bboxpick-collect --repo_id=local/lego_pick_expert --root=outputs/datasets/expert \
         --settings=grid_id --episodes=50 --workers=2
     bboxpick-collect ... --split=validation   # an evaluation dataset from seeds 5000-9999
+    bboxpick-collect ... --workers=16 --ray_address=auto   # workers on a Ray cluster (docs/ray.md)
 
 Demonstrations come from the training seeds (0-4999, ``lerobot_bboxpick.seeds``); a seed at or above
 5000 is refused unless ``--split`` says the dataset is for validation or test.
@@ -23,7 +24,6 @@ every attempt is kept, labelled by its ``episode.outcome`` column, for offline R
 import contextlib
 import json
 import logging
-import multiprocessing as mp
 import shutil
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -41,6 +41,7 @@ from lerobot_bboxpick.data.features import (
     make_frame,
     outcome_code,
 )
+from lerobot_bboxpick.parallel import check_ray, worker_pool
 from lerobot_bboxpick.quiet import quiet_libraries, redirect_native_output
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 
@@ -65,7 +66,14 @@ class CollectConfig:
     # First seed; None starts at the split's first seed. Every seed used must lie in ``split``.
     seed_start: int | None = None
     workers: int = 1
+    # Ray cluster the workers run on: "auto" (the one this machine joined with ray start),
+    # "ray://<head>:10001" or "local" (a new Ray instance here); None: local processes. The shards are
+    # written by the workers, so root must be on a file system every node shares (docs/ray.md).
+    ray_address: str | None = None
     keep_failed: bool = False
+    # Fraction of episodes that start with an unrecorded off-course lead-in and record the expert's
+    # recovery from there (lerobot_bboxpick.data.recovery); 0: plain demos.
+    recovery: float = 0.0
     resume: bool = False
     # Episodes per shard: the most work an interruption can lose.
     shard_size: int = SHARD_SIZE
@@ -82,7 +90,10 @@ class CollectConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+        if not 0.0 <= self.recovery <= 1.0:
+            raise ValueError(f"recovery={self.recovery!r} must be a fraction in [0, 1]")
         seeds.check_split(self.split)
+        check_ray(self.ray_address)
         if self.seed_start is None:
             self.seed_start = seeds.SPLITS[self.split][0]
         # At least the first `episodes` seeds are used; more when the expert fails some.
@@ -192,6 +203,12 @@ def record_episode(
     obs, info = env.reset(seed=seed, options=options)
     expert = ScriptedExpert(np.random.default_rng(seed if rng_seed is None else rng_seed))
     expert.reset(env)
+    return run_expert(env, obs, info, expert)
+
+
+def run_expert(env, obs: dict, info: dict, expert: Any) -> tuple[list[dict], str]:
+    """Record ``expert``'s plan (already made from the env's current state, whose observation is
+    ``obs``/``info``) until it is done or the episode ends; return the frames and the outcome."""
     frames = []
     while not expert.done:
         action = expert.act()
@@ -308,9 +325,9 @@ def collect(
     records = attempted(cfg.work_dir)
     kept = sum(r["kept"] for r in records)
     next_seed = max([cfg.seed_start - 1] + [r["seed"] for r in records]) + 1
-    ctx = mp.get_context("spawn")  # fresh processes: each opens its own EGL context
     progress = tqdm(total=cfg.episodes, initial=min(kept, cfg.episodes), desc="episodes kept", unit="ep")
-    with ctx.Pool(cfg.workers) as pool:
+    # Fresh processes (spawned, or Ray's): each opens its own EGL context.
+    with worker_pool(cfg.workers, cfg.ray_address) as pool:
         while kept < cfg.episodes:
             batch = list(range(next_seed, next_seed + cfg.episodes - kept))
             # Expert failures use up seeds: refuse to spill over into the next split.
@@ -352,5 +369,10 @@ def collect(
 def main(cfg: CollectConfig) -> None:
     """Entry point of ``bboxpick-collect``."""
     logging.basicConfig(level=logging.INFO)
-    summary = collect(cfg)
+    recorder = None
+    if cfg.recovery > 0:
+        from lerobot_bboxpick.data.recovery import RecoveryRecorder
+
+        recorder = RecoveryRecorder(fraction=cfg.recovery)
+    summary = collect(cfg, recorder)
     print(json.dumps(summary, indent=1))

@@ -17,10 +17,11 @@ step ``t`` and the absolute pose10 action the policy returned and the env execut
   them. ``--seed_start`` defaults to 1000, past the first expert demonstrations; evaluation seeds are
   refused. ``--episodes`` is per setting: seeds ``seed_start ...`` cycle through ``--settings``
   (``seed % len(settings)`` picks the setting), as in ``bboxpick-collect``.
-* **Sharding, resume, workers, log redirection and aggregation** are ``bboxpick-collect``'s
-  (``data.collect``, with a policy recorder instead of the expert). Every seed's record carries the run
-  key (checkpoint weights digest, max steps, executed steps per chunk); ``--resume=true`` with another
-  checkpoint or options is refused, so a dataset never mixes two policies.
+* **Sharding, resume, workers (local processes, or a Ray cluster with ``--ray_address``), log
+  redirection and aggregation** are ``bboxpick-collect``'s (``data.collect``, with a policy recorder
+  instead of the expert). Every seed's record carries the run key (checkpoint weights digest, max
+  steps, executed steps per chunk); ``--resume=true`` with another checkpoint or options is refused, so
+  a dataset never mixes two policies.
 * ``--merge_with=<root>``: a dataset of the same schema (expert demos) aggregated first, with LeRobot's
   ``aggregate_datasets``, into ``--root``: one dataset with demos and rollouts.
 * ``--stats_png``: episodes per outcome and setting, and episode lengths per outcome (``viz``).
@@ -80,6 +81,9 @@ class RolloutsConfig:
     # Executed steps per predicted chunk; None keeps the checkpoint's own setting.
     n_action_steps: int | None = None
     workers: int = 1
+    # Ray cluster the workers run on: "auto", "ray://<head>:10001" or "local"; None: local processes.
+    # root and policy_path must be on a file system every node shares (docs/ray.md).
+    ray_address: str | None = None
     resume: bool = False
     # Episodes per shard: the most work an interruption can lose.
     shard_size: int = SHARD_SIZE
@@ -123,6 +127,7 @@ class RolloutsConfig:
             split="train",
             seed_start=self.seed_start,
             workers=self.workers,
+            ray_address=self.ray_address,
             keep_failed=True,
             resume=self.resume,
             shard_size=self.shard_size,

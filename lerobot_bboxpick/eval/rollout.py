@@ -29,10 +29,15 @@ class PolicyRunner:
 
     @classmethod
     def from_pretrained(
-        cls, path: str | Path, device: str = "cpu", n_action_steps: int | None = None
+        cls,
+        path: str | Path,
+        device: str = "cpu",
+        n_action_steps: int | None = None,
+        num_inference_steps: int | None = None,
     ) -> PolicyRunner:
         """Load like ``lerobot-eval --policy.path=path``; ``n_action_steps`` overrides the steps executed
-        per predicted chunk (like ``--policy.n_action_steps``)."""
+        per predicted chunk (like ``--policy.n_action_steps``), ``num_inference_steps`` the denoising
+        steps per chunk (a diffusion policy's ``--policy.num_inference_steps``)."""
         from lerobot.configs import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
@@ -40,6 +45,10 @@ class PolicyRunner:
         config.device = device
         if n_action_steps is not None:
             config.n_action_steps = n_action_steps
+        if num_inference_steps is not None:
+            if not hasattr(config, "num_inference_steps"):
+                raise ValueError(f"num_inference_steps: policy type {config.type!r} has no denoising steps")
+            config.num_inference_steps = num_inference_steps
         policy = get_policy_class(config.type).from_pretrained(path, config=config)
         policy.eval()
         pre, post = make_pre_post_processors(

@@ -2,6 +2,7 @@
 
     bboxpick-suite --policies=expert,outputs/train/checkpoints/last/pretrained_model \
         --settings=grid_id,identical_4 --episodes=30 --workers=2 --out_dir=outputs/suite
+    bboxpick-suite ... --workers=32 --ray_address=auto   # episodes on a Ray cluster (docs/ray.md)
 
 Every policy meets the same scenes: episode ``k`` of a setting resets the env with seed
 ``seed_start + k`` (test seeds >= 10000 by default, ``lerobot_bboxpick.seeds``; validation seeds
@@ -35,15 +36,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import draccus
 import numpy as np
 from tqdm import tqdm
 
 from lerobot_bboxpick import seeds
 from lerobot_bboxpick.eval.bbox_source import DEFAULT_NOISY_IOU, check_bbox_source
+from lerobot_bboxpick.parallel import check_ray, worker_pool
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 from lerobot_bboxpick.sim.outcome import OUTCOMES
-from lerobot_bboxpick.viz import outcome_bars
+from lerobot_bboxpick.viz import THUMBNAIL_PX, outcome_bars, outcome_sheet, save_png
 
 EXPERT = "expert"
 log = logging.getLogger(__name__)
@@ -62,11 +65,17 @@ class SuiteConfig:
     # choosing a recipe.
     seed_start: int = seeds.TEST_START
     workers: int = 2
+    # Ray cluster the workers run on: "auto" (the one this machine joined with ray start),
+    # "ray://<head>:10001" or "local" (a new Ray instance here); None: local processes. Checkpoints and
+    # out_dir (videos) must be on a file system every node shares (docs/ray.md).
+    ray_address: str | None = None
     # Rollout videos kept per policy and setting (the first seeds).
     videos: int = 2
     max_steps: int = 300
     # Executed steps per predicted chunk; None keeps each checkpoint's own setting.
     n_action_steps: int | None = None
+    # Denoising steps per chunk instead of the checkpoint's (an inference-speed lever, docs/benchmarks.md).
+    num_inference_steps: int | None = None
     # The bbox the policy sees: oracle, noisy or tracked (see the module docstring).
     bbox_source: str = "oracle"
     # Target IoU of the noisy bbox with the oracle one.
@@ -83,7 +92,12 @@ class SuiteConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+        for name in ("n_action_steps", "num_inference_steps"):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, int) or value < 1):
+                raise ValueError(f"{name}={value!r} must be an integer >= 1 (or unset: the checkpoint's)")
         check_bbox_source(self.bbox_source)
+        check_ray(self.ray_address)
         if not 0.0 < self.noisy_iou <= 1.0:
             raise ValueError(f"noisy_iou={self.noisy_iou!r} must be in (0, 1]")
         if not isinstance(self.seed_start, int) or self.seed_start < 0:
@@ -140,6 +154,8 @@ def run_key(cfg: SuiteConfig, path: str) -> dict:
     if path != EXPERT:
         own = json.loads((Path(path) / "config.json").read_text()).get("n_action_steps")
         key["n_action_steps"] = cfg.n_action_steps if cfg.n_action_steps is not None else own
+        if cfg.num_inference_steps is not None:  # absent otherwise: older tables' run keys stay valid
+            key["num_inference_steps"] = cfg.num_inference_steps
     return key
 
 
@@ -176,21 +192,26 @@ def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, flo
 
 # ---------------------------------------------------------------- worker side
 # Per worker process: the loaded checkpoint (one at a time) and one env per setting, reused across episodes.
-_POLICIES: dict[str, Any] = {}
+_POLICIES: dict[tuple, Any] = {}
 _ENVS: dict[tuple[str, int], Any] = {}
 
 
-def load_runner(path: str, n_action_steps: int | None, env: Any) -> Any:
+def load_runner(
+    path: str, n_action_steps: int | None, env: Any, num_inference_steps: int | None = None
+) -> Any:
     """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept."""
     from lerobot_bboxpick.eval.rollout import ExpertRunner, PolicyRunner
 
     if path == EXPERT:
         return ExpertRunner(env)
-    if path not in _POLICIES:
+    key = (path, n_action_steps, num_inference_steps)
+    if key not in _POLICIES:
         _POLICIES.clear()  # one checkpoint in memory per worker at a time
         with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights ..." per load
-            _POLICIES[path] = PolicyRunner.from_pretrained(path, n_action_steps=n_action_steps)
-    return _POLICIES[path]
+            _POLICIES[key] = PolicyRunner.from_pretrained(
+                path, n_action_steps=n_action_steps, num_inference_steps=num_inference_steps
+            )
+    return _POLICIES[key]
 
 
 def _env(setting: str, max_steps: int) -> Any:
@@ -211,7 +232,7 @@ def run_episode(task: dict) -> dict:
     from lerobot_bboxpick.eval.bbox_source import BboxSource
 
     env = _env(task["setting"], task["max_steps"])
-    runner = load_runner(task["path"], task.get("n_action_steps"), env)
+    runner = load_runner(task["path"], task.get("n_action_steps"), env, task.get("num_inference_steps"))
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
     source = BboxSource(task["run_key"]["bbox_source"], task["run_key"].get("noisy_iou", DEFAULT_NOISY_IOU))
@@ -225,6 +246,11 @@ def run_episode(task: dict) -> dict:
         env=env,
         bbox_source=source,
     )
+    if task.get("frame"):  # the last wrist frame, for the outcome sheet
+        save_png(
+            task["frame"],
+            cv2.resize(env.render(), (THUMBNAIL_PX, THUMBNAIL_PX), interpolation=cv2.INTER_AREA),
+        )
     return {
         "policy": task["label"],
         "path": task["path"],
@@ -254,12 +280,38 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, di
                         "seed": seed,
                         "max_steps": cfg.max_steps,
                         "n_action_steps": cfg.n_action_steps,
+                        "num_inference_steps": cfg.num_inference_steps,
                         "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
+                        "frame": str(frame_path(cfg.out_dir, label, setting, seed)),
                         "threads": threads,
                     }
                 )
     return tasks
+
+
+def frame_path(out_dir: Path, label: str, setting: str, seed: int) -> Path:
+    """Where an episode's final-frame thumbnail is kept."""
+    return out_dir / "frames" / label / f"{setting}_seed{seed}.png"
+
+
+def write_outcome_sheets(records: list[dict], out_dir: Path, policies: list[str]) -> list[Path]:
+    """``outcomes_<policy>.png`` per policy: every episode's last wrist frame, labelled with its seed and
+    outcome and framed in the outcome's colour, ordered by setting name then seed (episodes without a
+    thumbnail are left out)."""
+    paths = []
+    for policy in policies:
+        tiles = []
+        for r in sorted(
+            (r for r in records if r["policy"] == policy), key=lambda r: (r["setting"], r["seed"])
+        ):
+            thumb = frame_path(out_dir, policy, r["setting"], r["seed"])
+            if thumb.exists():
+                image = cv2.cvtColor(cv2.imread(str(thumb)), cv2.COLOR_BGR2RGB)
+                tiles.append((image, f"{r['seed']} {r['outcome']}", r["outcome"]))
+        if tiles:
+            paths.append(save_png(out_dir / f"outcomes_{policy}.png", outcome_sheet(tiles)))
+    return paths
 
 
 def read_episodes(path: Path) -> list[dict]:
@@ -321,12 +373,12 @@ def run_suite(cfg: SuiteConfig) -> Path:
             bar.set_postfix_str(f"pick {picks}/{len(records)}")
             bar.update()
 
-        if cfg.workers == 1:
+        if cfg.workers == 1 and not cfg.ray_address:
             for task in tasks:
                 record(run_episode(task))
         else:
-            # Spawned workers: a fresh GL context and torch per process, nothing inherited.
-            with mp.get_context("spawn").Pool(cfg.workers, maxtasksperchild=None) as pool:
+            # Spawned (or Ray's) workers: a fresh GL context and torch per process, nothing inherited.
+            with worker_pool(cfg.workers, cfg.ray_address, maxtasksperchild=None) as pool:
                 for result in pool.imap_unordered(run_episode, tasks, chunksize=1):
                     record(result)
     source = cfg.bbox_source + (
@@ -390,6 +442,7 @@ def write_report(
         writer.writeheader()
         writer.writerows(rows)
     outcome_bars(rows, OUTCOMES, out_dir / "outcomes.png")
+    write_outcome_sheets(records, out_dir, policies)
     used = sorted({r["seed"] for r in records})
     split_names = " + ".join(dict.fromkeys(seeds.split_of(x) for x in used)) + " seeds"
     header = (
@@ -414,4 +467,7 @@ def main(cfg: SuiteConfig) -> None:
     logging.basicConfig(level=logging.INFO)
     table = run_suite(cfg)
     print(table.read_text())
-    print(f"report (table.md, table.csv, outcomes.png, episodes.jsonl, videos/) in {cfg.out_dir.resolve()}")
+    print(
+        "report (table.md, table.csv, outcomes.png, outcomes_<policy>.png, episodes.jsonl, videos/) in "
+        f"{cfg.out_dir.resolve()}"
+    )

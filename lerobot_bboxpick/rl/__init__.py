@@ -5,5 +5,6 @@
   state encoder is the ``bbox_diffusion`` policy's own observation encoder, frozen and warm-started.
 * ``critic_dataset``: LeRobotDataset with outcome labels -> chunk transitions with sparse terminal reward.
 * ``diagnostics``: V/Q/A/TD grouped by outcome and phase, and the value-ordering checks.
+* ``counterfactual``: snapshot and restore a ``LegoPickEnv`` mid-episode, run alternative branches from it.
 * ``train_critic`` (``bboxpick-train-critic``), ``verify`` (``bboxpick-verify-critic``), ``rerank``.
 """

@@ -128,9 +128,14 @@ class BboxDiffusionModel(nn.Module):
         images = batch[self.config.image_key]
         states = batch[OBS_STATE]
         bboxes = batch.get(self.config.bbox_feature_key)
-        if images.ndim == 4:  # a single step without a time axis
-            images, states = images[:, None], states[:, None]
-            bboxes = None if bboxes is None else bboxes[:, None]
+        # A single step without a time axis, per tensor: with one observed step (n_obs_steps=1)
+        # LeRobotDataset squeezes the video frame's time axis but keeps the state's and the bbox's.
+        if images.ndim == 4:
+            images = images[:, None]
+        if states.ndim == 2:
+            states = states[:, None]
+        if bboxes is not None and bboxes.ndim == 2:
+            bboxes = bboxes[:, None]
         return images, states, bboxes
 
     def compute_loss(self, batch: dict[str, Tensor]) -> Tensor:
