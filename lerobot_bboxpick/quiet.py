@@ -6,8 +6,11 @@ encoder writes straight to file descriptor 2) or through their own bars goes to 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -42,3 +45,26 @@ def redirect_native_output(log_file: str | Path) -> None:
         os.dup2(fd, target)
     os.close(fd)
     quiet_libraries()
+
+
+@contextlib.contextmanager
+def native_output_to(log_file: str | Path) -> Iterator[None]:
+    """Send this process's file descriptor 2 (and Python's stderr) to ``log_file`` for the duration.
+
+    For a parent between progress bars: LeRobot's video helpers restore FFmpeg's default log callback
+    after each use, so the MP4 muxer's lines reach descriptor 2 whatever ``quiet_libraries`` set.
+    """
+    path = Path(log_file)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sys.stderr.flush()
+    saved = os.dup(2)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    try:
+        os.dup2(fd, 2)
+        with open(path, "a") as log, contextlib.redirect_stderr(log):  # Python-level bars and warnings
+            yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(fd)

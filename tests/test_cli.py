@@ -81,6 +81,21 @@ def test_run_trains_the_recipe_and_the_ablation_without_a_centroid(tmp_path):
     ]
 
 
+def test_quick_and_practical_profiles_train_the_fast_encoder_and_full_the_preset(tmp_path):
+    """The first run and the practical recipe use the 64 px single-frame encoder; the paper protocol
+    keeps the preset; only the practical recipe records recoveries from every layout."""
+    from lerobot_bboxpick.apps.main_job import PROFILES, train_command
+    from lerobot_bboxpick.sim.layouts import SETTINGS
+
+    fast = {"--policy.image_size=64", "--policy.n_obs_steps=1"}
+    for name, wanted in (("quick", True), ("practical", True), ("full", False)):
+        args = set(train_command(PROFILES[name], tmp_path, "local/x", tmp_path / name, 100, False))
+        assert (fast <= args) == wanted, name
+    practical = PROFILES["practical"]
+    assert practical.recovery == 0.3 and practical.train_settings.split(",") == list(SETTINGS)
+    assert PROFILES["full"].recovery == PROFILES["quick"].recovery == 0.0
+
+
 def test_quick_training_is_sized_by_its_time_budget_and_full_by_its_samples():
     """Steps follow the measured rate: a 3x slower machine trains 3x fewer steps in the same minutes;
     the recipe keeps its fixed sample budget on any machine."""

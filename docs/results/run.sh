@@ -43,6 +43,43 @@ if want validation_steps; then
     --out_dir=$FULL/validation_steps
   publish $FULL/validation_steps validation_steps
 fi
+# The fast encoder (64 px, one observed frame) for the quick profile, on validation seeds 5000-5009:
+# 60 grid demos, the checkpoints after 20,000 and 40,000 samples.
+if want validation_fast_encoder; then
+  X=outputs/exp
+  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
+    --workers=2 --resume=true
+  [ -f $X/train_e1/checkpoints/001250/pretrained_model/config.json ] || lerobot-train \
+    --policy.type=bbox_diffusion --policy.device=cpu --policy.use_amp=true --policy.image_size=64 \
+    --policy.n_obs_steps=1 --policy.scheduler_warmup_steps=100 --dataset.repo_id=local/grid60 \
+    --dataset.root=$X/grid60 --output_dir=$X/train_e1 --steps=1250 --batch_size=32 --num_workers=1 \
+    --save_freq=625 --log_freq=50 --wandb.enable=false
+  for s in 000625 001250; do
+    bboxpick-suite --policies=e1_img64obs1_$s=$X/train_e1/checkpoints/$s/pretrained_model \
+      --settings=grid_id,identical_4 --episodes=10 --seed_start=5000 --videos=0 --out_dir=$X/val_e1_$s
+    publish $X/val_e1_$s validation_fast_encoder_$s
+    cp $X/val_e1_$s/outcomes_e1_img64obs1_$s.png docs/results/validation_fast_encoder_$s/outcomes_sheet.png
+  done
+fi
+# The practical recipe (every layout, 30% recovery demos, fast encoder, 160,000 samples), exported as
+# the shipped checkpoint (EMA weights, float16) and evaluated as shipped; then its inference-step levers
+# on validation seeds.
+if want practical_oracle; then
+  bash scripts/main.sh --profile practical   # its own suite (the float32 checkpoint) is optional: ^C it
+  bboxpick-export --src=outputs/main/practical/train/checkpoints/005000/pretrained_model \
+    --dst=examples/bbox_diffusion_lego_pick --half=true
+  bboxpick-suite --policies=expert,practical=examples/bbox_diffusion_lego_pick --episodes=30 --videos=1 \
+    --out_dir=outputs/main/practical/suite_shipped
+  publish outputs/main/practical/suite_shipped practical_oracle
+  cp outputs/main/practical/train/sizing.json docs/results/practical_oracle/
+fi
+if want validation_inference_steps; then
+  for n in 16 8 4; do
+    bboxpick-suite --policies=steps$n=examples/bbox_diffusion_lego_pick --num_inference_steps=$n \
+      --settings=grid_id,random_id --episodes=10 --seed_start=5000 --videos=0 --out_dir=outputs/exp/val_steps$n
+    publish outputs/exp/val_steps$n validation_steps$n
+  done
+fi
 # The main job as a new user runs it (README's first command), on a fresh output folder.
 if want main_job; then
   bash scripts/main.sh --out-dir outputs/main_job | tee outputs/main_job.console.txt

@@ -189,6 +189,111 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
     return "\n".join(lines)
 
 
+# Training-speed levers: bbox_diffusion config overrides timed beside the preset in one run.
+TRAINING_LEVERS: dict[str, dict[str, Any]] = {
+    "preset (96 px, 2 observed frames)": {},
+    "80 px": {"image_size": 80},
+    "64 px": {"image_size": 64},
+    "1 observed frame": {"n_obs_steps": 1},
+    "64 px, 1 frame (fast encoder)": {"image_size": 64, "n_obs_steps": 1},
+    "half-width UNet": {"down_dims": (32, 64, 128)},
+}
+
+
+def _lever_policy(overrides: dict[str, Any]) -> Any:
+    """A randomly initialised (seed 0) bbox_diffusion policy with the preset's config and ``overrides``."""
+    import torch
+
+    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+    from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+
+    torch.manual_seed(0)
+    inputs, outputs = _policy_features()
+    config = BboxDiffusionConfig(device="cpu", input_features=inputs, output_features=outputs, **overrides)
+    return BboxDiffusionPolicy(config)
+
+
+def bench_training_levers(batch_size: int = 32, steps: int = 6) -> str:
+    """Markdown table: where a training step's time goes, per ``TRAINING_LEVERS`` entry (float32, random
+    tensors, no data loading): the whole step, the observation encoder's forward + backward, and the
+    paired augmentation, with samples/s and its ratio to the preset; plus LeRobotDataset's own sample rate
+    (one process, a freshly collected 2-episode dataset), the loader's ceiling."""
+    import tempfile
+
+    import torch
+
+    rows = {}
+    for name, overrides in TRAINING_LEVERS.items():
+        policy = _lever_policy(overrides).train()
+        config = policy.config
+        t = config.n_obs_steps
+        batch = {
+            "observation.images.wrist": torch.rand(batch_size, t, 3, 224, 224),
+            "observation.state": torch.rand(batch_size, t, 10),
+            "observation.bbox": torch.tensor([0.4, 0.4, 0.5, 0.5]).expand(batch_size, t, 4),
+            "action": torch.rand(batch_size, 16, 10),
+        }
+        opt = torch.optim.AdamW(policy.parameters(), lr=1e-4)
+        step, encode, augment = [], [], []
+        for _ in range(steps + 1):  # the first step warms up
+            t0 = time.perf_counter()
+            loss, _ = policy.forward(batch)
+            loss.backward()
+            opt.step()
+            opt.zero_grad()
+            policy.update()
+            t1 = time.perf_counter()
+            model = policy.model
+            cond = model.global_condition(
+                batch["observation.images.wrist"], batch["observation.state"], batch["observation.bbox"]
+            )
+            cond.sum().backward()
+            opt.zero_grad()
+            t2 = time.perf_counter()
+            model.augment(
+                batch["observation.images.wrist"], torch.rand(batch_size, t, 1, 224, 224), config.image_size
+            )
+            step.append(t1 - t0)
+            encode.append(t2 - t1)
+            augment.append(time.perf_counter() - t2)
+        rows[name] = [float(np.median(x[1:])) for x in (step, encode, augment)]
+    base = rows[next(iter(TRAINING_LEVERS))][0]
+    lines = [
+        f"| training lever (float32, batch {batch_size}, model only) | s per step | samples/s | ratio to the "
+        "preset | encoder fwd+bwd s | augmentation s |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, (st, enc, aug) in rows.items():
+        lines.append(
+            f"| {name} | {st:.3f} | {batch_size / st:.1f} | {base / st:.2f}x | {enc:.3f} | {aug:.3f} |"
+        )
+    with tempfile.TemporaryDirectory() as tmp:
+        rate = _dataset_sample_rate(Path(tmp))
+    lines.append(
+        f"\nLeRobotDataset, one process: {rate:.0f} samples/s (2 frames + state + bbox + 16-step action per "
+        "sample, video decoded); lerobot-train's data loader worker shares the 2 cores with the step."
+    )
+    return "\n".join(lines)
+
+
+def _dataset_sample_rate(tmp: Path, samples: int = 96) -> float:
+    """Samples/s of ``LeRobotDataset.__getitem__`` with the policy's delta timestamps, one process."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from lerobot_bboxpick.data.collect import CollectConfig, collect
+
+    collect(CollectConfig(repo_id="bench/data", root=tmp / "ds", episodes=2, workers=1))
+    window = {"observation.images.wrist": [-0.05, 0.0], "observation.state": [-0.05, 0.0]}
+    window |= {"observation.bbox": [-0.05, 0.0], "action": [i / 20 for i in range(16)]}
+    dataset = LeRobotDataset("bench/data", root=tmp / "ds", delta_timestamps=window)
+    order = np.random.default_rng(0).integers(0, len(dataset), samples).tolist()
+    dataset[order[0]]
+    t0 = time.perf_counter()
+    for i in order:
+        dataset[i]
+    return samples / (time.perf_counter() - t0)
+
+
 # Inference-speed levers, each a set of bbox_diffusion config overrides timed beside the preset in one run
 # (docs/benchmarks.md holds their pick rates on validation seeds).
 INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
@@ -208,12 +313,8 @@ def bench_inference_levers(chunks: int = 12, threads: int | None = None) -> str:
     thread count (None: torch's default)."""
     import torch
 
-    from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
-    from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
-
     if threads is not None:
         torch.set_num_threads(threads)
-    inputs, outputs = _policy_features()
     obs = {
         "observation.images.wrist": torch.rand(1, 3, 224, 224),
         "observation.state": torch.rand(1, 10),
@@ -221,11 +322,7 @@ def bench_inference_levers(chunks: int = 12, threads: int | None = None) -> str:
     }
     times = {}
     for name, overrides in INFERENCE_LEVERS.items():
-        torch.manual_seed(0)
-        config = BboxDiffusionConfig(
-            device="cpu", input_features=inputs, output_features=outputs, **overrides
-        )
-        policy = BboxDiffusionPolicy(config).eval()
+        policy = _lever_policy(overrides).eval()
         samples = []
         with torch.no_grad():
             for _ in range(chunks + 2):  # the first two trace and warm up the UNet

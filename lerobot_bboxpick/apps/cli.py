@@ -60,7 +60,12 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument(
         "--inference", action="store_true", help="also time the inference levers (ms per chunk) side by side"
     )
-    bench.add_argument("--all", action="store_true", help="--policies --inference --collect --suite")
+    bench.add_argument(
+        "--training", action="store_true", help="also time the training levers and the data loader"
+    )
+    bench.add_argument(
+        "--all", action="store_true", help="--policies --training --inference --collect --suite"
+    )
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
     sheet.add_argument("--out", type=Path, default=Path("examples/settings_contact_sheet.png"))
     sheet.add_argument("--seed", type=int, default=0)
@@ -86,11 +91,15 @@ def main(argv: list[str] | None = None) -> int:
 
         table = bench_table(args.settings, steps=args.steps)
         if args.all:
-            args.policies = args.inference = args.collect = args.suite = True
+            args.policies = args.training = args.inference = args.collect = args.suite = True
         if args.policies:
             from lerobot_bboxpick.apps.bench import bench_policies
 
             table += "\n\n" + bench_policies()
+        if args.training:
+            from lerobot_bboxpick.apps.bench import bench_training_levers
+
+            table += "\n\n" + bench_training_levers()
         if args.inference:
             from lerobot_bboxpick.apps.bench import bench_inference_levers
 

@@ -11,8 +11,6 @@ again: float16 storage, loaded into the float32 model (PyTorch's ``load_state_di
 is unchanged apart from the rounding, which the suite table of the export checks.
 """
 
-from __future__ import annotations
-
 import json
 import shutil
 from dataclasses import dataclass
@@ -67,6 +65,10 @@ def export(cfg: ExportConfig) -> Path:
         if f.is_file() and f.name not in (WEIGHTS, "config.json", "train_config.json"):
             shutil.copy2(f, cfg.dst / f.name)
     config["use_ema"] = False  # the EMA weights *are* the weights now
+    # Training-only facts: bf16 autocast (lerobot-eval would open it around inference, ~70x slower on a
+    # CPU that emulates bf16) and the folder it was loaded from on the training machine.
+    config["use_amp"] = False
+    config["pretrained_path"] = None
     (cfg.dst / "config.json").write_text(json.dumps(config, indent=4))
     out = cfg.dst / WEIGHTS
     save_file({k: v.contiguous() for k, v in weights.items()}, out)

@@ -39,8 +39,8 @@ LOG_FREQ = 10  # lerobot-train logs every this many steps
 _STEP_LINE = re.compile(r"step:(\S+) .*updt_s:([\d.]+) data_s:([\d.]+)")
 
 
-# The fast encoder input: 64 px, one observed frame (2.5x the training samples/s of the 96 px two-frame
-# preset; docs/benchmarks.md).
+# The fast encoder input: 64 px, one observed frame (2.5x the model's training samples/s of the 96 px
+# two-frame preset, ~1.4x with lerobot-train's data loading; docs/benchmarks.md).
 FAST_ENCODER = ("--policy.image_size=64", "--policy.n_obs_steps=1")
 PRACTICAL_STEPS = 5000  # 160,000 samples of batch 32, the paper-protocol recipe's budget
 
@@ -78,8 +78,8 @@ class Profile:
 
 PROFILES = {
     # About 15 minutes on any machine of this kind: ~9 of them training, whatever the machine's rate, with
-    # the fast encoder (at the same sample budget it picks more on validation seeds than the preset;
-    # docs/results.md). Evaluated on the two layouts it trains on.
+    # the fast encoder (twice the preset's samples/s; its validation picks in docs/results.md). Evaluated
+    # on the two layouts it trains on.
     "quick": Profile(
         episodes=60,
         train_settings="grid_id,identical_4",

@@ -21,7 +21,6 @@ Only episodes the expert completes with outcome "pick" are kept unless ``--keep_
 every attempt is kept, labelled by its ``episode.outcome`` column, for offline RL).
 """
 
-import contextlib
 import json
 import logging
 import shutil
@@ -42,7 +41,7 @@ from lerobot_bboxpick.data.features import (
     outcome_code,
 )
 from lerobot_bboxpick.parallel import check_ray, worker_pool
-from lerobot_bboxpick.quiet import quiet_libraries, redirect_native_output
+from lerobot_bboxpick.quiet import native_output_to, quiet_libraries, redirect_native_output
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 
 SHARD_SIZE = 5
@@ -354,7 +353,7 @@ def collect(
     progress.close()
     quiet_libraries()
     cfg.log_file.parent.mkdir(parents=True, exist_ok=True)
-    with open(cfg.log_file, "a") as log, contextlib.redirect_stderr(log):  # LeRobot's copy bars
+    with native_output_to(cfg.log_file):  # LeRobot's copy bars, FFmpeg's muxer lines
         total = aggregate(cfg, merge_with)
     outcomes = {o: sum(r["outcome"] == o for r in records) for o in ("pick", "wrong", "contact", "empty")}
     summary = {"root": str(cfg.root), "episodes": total, "attempted": len(records), "outcomes": outcomes}
