@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from lerobot_bboxpick.data.collect import ExpertRecorder
+from lerobot_bboxpick.data.collect import CollectConfig, ExpertRecorder, collect
 from lerobot_bboxpick.data.recovery import LEAD_INS, RecoveryRecorder, lead_in_actions
+from lerobot_bboxpick.data.replay import episode_arrays, load_dataset
 from lerobot_bboxpick.keys import STATE
 
 
@@ -50,6 +51,15 @@ def test_fraction_one_records_recoveries_and_zero_plain_demos(env):
     np.testing.assert_array_equal(
         np.stack([f["action"] for f in frames]), np.stack([f["action"] for f in again])
     )
+
+
+def test_collect_config_recovery_reaches_the_recorder(env, tmp_path):
+    """``CollectConfig(recovery=...)`` alone (what the main job's practical profile passes) records
+    recovery demos: the episode starts where the lead-in left the arm, not at the reset pose."""
+    root = tmp_path / "ds"
+    collect(CollectConfig(repo_id="test/recovery", root=root, episodes=1, recovery=1.0))
+    states = episode_arrays(load_dataset("test/recovery", root), 0)["states"]
+    assert np.linalg.norm(states[0, :3] - _start_state(env, 0)[:3]) > 0.08
 
 
 def test_bad_fraction_and_kind_are_refused(env):

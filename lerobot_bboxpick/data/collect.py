@@ -147,6 +147,15 @@ class ExpertRecorder(EpisodeRecorder):
         return record_episode(env, seed)
 
 
+def expert_recorder(recovery: float) -> EpisodeRecorder:
+    """The scripted expert's recorder: plain demos, or that fraction of recovery demos."""
+    if recovery <= 0:
+        return ExpertRecorder()
+    from lerobot_bboxpick.data.recovery import RecoveryRecorder  # it builds on this module
+
+    return RecoveryRecorder(fraction=recovery)
+
+
 @dataclass(frozen=True)
 class ShardTask:
     """One worker job: record ``seeds`` into ``path``."""
@@ -304,10 +313,11 @@ def collect(
 ) -> dict:
     """Collect until ``cfg.episodes`` episodes are kept; returns a summary.
 
-    ``recorder`` records each seed (default: the scripted expert, ``ExpertRecorder``); the datasets at
+    ``recorder`` records each seed (default: the scripted expert, with ``cfg.recovery`` of its episodes
+    recovery demos, ``expert_recorder``); the datasets at
     ``merge_with`` are aggregated into ``root`` before the recorded episodes.
     """
-    recorder = recorder or ExpertRecorder()
+    recorder = recorder or expert_recorder(cfg.recovery)
     if cfg.root.exists() and not cfg.resume:
         raise FileExistsError(
             f"root={cfg.root} already exists; pass --resume=true to continue that collection "
@@ -368,10 +378,5 @@ def collect(
 def main(cfg: CollectConfig) -> None:
     """Entry point of ``bboxpick-collect``."""
     logging.basicConfig(level=logging.INFO)
-    recorder = None
-    if cfg.recovery > 0:
-        from lerobot_bboxpick.data.recovery import RecoveryRecorder
-
-        recorder = RecoveryRecorder(fraction=cfg.recovery)
-    summary = collect(cfg, recorder)
+    summary = collect(cfg)
     print(json.dumps(summary, indent=1))
