@@ -76,6 +76,10 @@ class SuiteConfig:
     n_action_steps: int | None = None
     # Denoising steps per chunk instead of the checkpoint's (an inference-speed lever, docs/benchmarks.md).
     num_inference_steps: int | None = None
+    # Q-reranking (paper section 4.2): every chunk is the argmax-Q of rerank_samples chunks the policy
+    # draws, scored by this critic checkpoint (bboxpick-train-critic / bboxpick-train-mc-critic).
+    critic_path: Path | None = None
+    rerank_samples: int = 8
     # The bbox the policy sees: oracle, noisy or tracked (see the module docstring).
     bbox_source: str = "oracle"
     # Target IoU of the noisy bbox with the oracle one.
@@ -88,7 +92,16 @@ class SuiteConfig:
 
     def __post_init__(self) -> None:
         self.out_dir = Path(self.out_dir)
-        for name, minimum in (("episodes", 1), ("workers", 1), ("max_steps", 1), ("videos", 0)):
+        self.critic_path = Path(self.critic_path) if self.critic_path is not None else None
+        if self.critic_path is not None and not (self.critic_path / "config.json").is_file():
+            raise ValueError(f"critic_path={self.critic_path} is not a critic checkpoint folder (no config.json)")
+        for name, minimum in (
+            ("episodes", 1),
+            ("workers", 1),
+            ("max_steps", 1),
+            ("videos", 0),
+            ("rerank_samples", 1),
+        ):
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
@@ -156,6 +169,9 @@ def run_key(cfg: SuiteConfig, path: str) -> dict:
         key["n_action_steps"] = cfg.n_action_steps if cfg.n_action_steps is not None else own
         if cfg.num_inference_steps is not None:  # absent otherwise: older tables' run keys stay valid
             key["num_inference_steps"] = cfg.num_inference_steps
+        if cfg.critic_path is not None:
+            key["critic"] = weights_digest(str(cfg.critic_path))
+            key["rerank_samples"] = cfg.rerank_samples
     return key
 
 
@@ -197,20 +213,34 @@ _ENVS: dict[tuple[str, int], Any] = {}
 
 
 def load_runner(
-    path: str, n_action_steps: int | None, env: Any, num_inference_steps: int | None = None
+    path: str,
+    n_action_steps: int | None,
+    env: Any,
+    num_inference_steps: int | None = None,
+    critic_path: str | None = None,
+    rerank_samples: int = 1,
 ) -> Any:
-    """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept."""
+    """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept;
+    with ``critic_path`` its chunks are Q-reranked among ``rerank_samples`` draws."""
     from lerobot_bboxpick.eval.rollout import ExpertRunner, PolicyRunner
 
     if path == EXPERT:
         return ExpertRunner(env)
-    key = (path, n_action_steps, num_inference_steps)
+    key = (path, n_action_steps, num_inference_steps, critic_path, rerank_samples)
     if key not in _POLICIES:
         _POLICIES.clear()  # one checkpoint in memory per worker at a time
         with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights ..." per load
-            _POLICIES[key] = PolicyRunner.from_pretrained(
+            runner = PolicyRunner.from_pretrained(
                 path, n_action_steps=n_action_steps, num_inference_steps=num_inference_steps
             )
+        if critic_path is not None:
+            from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
+            from lerobot_bboxpick.rl.rerank import QRerankSelector
+
+            if not hasattr(runner.policy, "chunk_selector"):
+                raise ValueError(f"critic_path: policy {path} ({runner.policy.name}) cannot rerank its chunks")
+            runner.policy.chunk_selector = QRerankSelector(IqlCriticModel.from_pretrained(critic_path), rerank_samples)
+        _POLICIES[key] = runner
     return _POLICIES[key]
 
 
@@ -232,7 +262,14 @@ def run_episode(task: dict) -> dict:
     from lerobot_bboxpick.eval.bbox_source import BboxSource
 
     env = _env(task["setting"], task["max_steps"])
-    runner = load_runner(task["path"], task.get("n_action_steps"), env, task.get("num_inference_steps"))
+    runner = load_runner(
+        task["path"],
+        task.get("n_action_steps"),
+        env,
+        task.get("num_inference_steps"),
+        task.get("critic_path"),
+        task.get("rerank_samples", 1),
+    )
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
     source = BboxSource(task["run_key"]["bbox_source"], task["run_key"].get("noisy_iou", DEFAULT_NOISY_IOU))
@@ -281,6 +318,8 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, di
                         "max_steps": cfg.max_steps,
                         "n_action_steps": cfg.n_action_steps,
                         "num_inference_steps": cfg.num_inference_steps,
+                        "critic_path": str(cfg.critic_path) if cfg.critic_path else None,
+                        "rerank_samples": cfg.rerank_samples,
                         "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
                         "frame": str(frame_path(cfg.out_dir, label, setting, seed)),

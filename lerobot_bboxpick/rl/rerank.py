@@ -3,7 +3,8 @@ chunks with the critic and keep the best one per state.
 
 ``rerank_by_q`` is the core on state features and relative chunks; ``rerank_absolute`` takes the
 policy's absolute chunks and an observation batch; ``sample_and_rerank`` draws the candidates from a
-``bbox_diffusion`` policy.
+``bbox_diffusion`` policy; ``QRerankSelector`` plugs that into the policy's ``select_action`` (what
+``bboxpick-suite --critic_path=... --rerank_samples=N`` runs).
 """
 
 from __future__ import annotations
@@ -73,3 +74,24 @@ def sample_and_rerank(
     repeated = {k: v.repeat_interleave(n, dim=0) for k, v in batch.items() if isinstance(v, Tensor)}
     chunks = policy.predict_action_chunk(repeated, generator=generator)
     return rerank_absolute(critic, batch, chunks.view(b, n, *chunks.shape[1:]))
+
+
+class QRerankSelector:
+    """A ``bbox_diffusion`` chunk selector (``policy.chunk_selector``): sample ``n`` chunks from the
+    policy and execute the argmax-Q one.
+
+    The trust region is the policy's own distribution: every executed chunk is one the imitation policy
+    could have drawn itself, so the critic only has to rank the policy's proposals, not to extrapolate
+    to actions no dataset showed it (where the paper's critics were flat or wrong).
+    """
+
+    def __init__(self, critic, n: int) -> None:
+        if n < 1:
+            raise ValueError(f"rerank samples n={n} must be >= 1")
+        self.critic, self.n = critic, n
+        self.last: RerankResult | None = None  # the latest choice, for diagnostics
+
+    def __call__(self, policy, stacked: dict[str, Tensor], generator: torch.Generator | None) -> Tensor:
+        """The chosen absolute chunk ``(B, H, 10)`` for observations ``stacked``."""
+        self.last = sample_and_rerank(policy, self.critic, stacked, self.n, generator=generator)
+        return self.last.best

@@ -12,6 +12,7 @@ The policy takes and returns absolute poses; the relative form (UMI) exists only
 
 import warnings
 from collections import deque
+from collections.abc import Callable
 from copy import deepcopy
 
 import torch
@@ -195,6 +196,11 @@ class BboxDiffusionModel(nn.Module):
         return self.action_scaler.inverse(sample)
 
 
+# ``(policy, observations (B, n_obs, ...), generator) -> absolute chunk (B, horizon, 10)``: how
+# ``select_action`` gets a new chunk; e.g. ``rl.rerank.QRerankSelector`` (sample N, keep the argmax-Q one).
+ChunkSelector = Callable[["BboxDiffusionPolicy", dict[str, Tensor], torch.Generator | None], Tensor]
+
+
 class BboxDiffusionPolicy(PreTrainedPolicy):
     """Bbox-conditioned diffusion policy (LeRobot plugin ``bbox_diffusion``)."""
 
@@ -209,6 +215,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         # EMA copy used for inference (UMI); saved with the checkpoint beside the trained weights.
         self.ema_model = deepcopy(self.model).requires_grad_(False) if config.use_ema else None
         self._ema_updates = 0
+        self.chunk_selector: ChunkSelector | None = None
         self.reset()
 
     def get_optim_params(self) -> list[dict]:
@@ -274,12 +281,16 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
-        """Next absolute action (B, 10); a new chunk is predicted every ``n_action_steps`` calls."""
+        """Next absolute action (B, 10); a new chunk is predicted every ``n_action_steps`` calls (by
+        ``chunk_selector`` when one is set, else ``predict_action_chunk``)."""
         batch = {k: v for k, v in batch.items() if k in self._queues}
         self._queues = populate_queues(self._queues, batch)
         if not self._actions:
             stacked = {k: torch.stack(list(q), dim=1) for k, q in self._queues.items()}
-            chunk = self.predict_action_chunk(stacked, generator=generator)
+            if self.chunk_selector is None:
+                chunk = self.predict_action_chunk(stacked, generator=generator)
+            else:  # e.g. critic reranking of several sampled chunks (set by the caller, never saved)
+                chunk = self.chunk_selector(self, stacked, generator)
             self._actions.extend(chunk[:, : self.config.n_action_steps].transpose(0, 1))
         return self._actions.popleft()
 
