@@ -118,7 +118,9 @@ def test_same_options_same_dataset_and_true_labels(tmp_path):
             assert a.ret[p, c] == pytest.approx(expected)
     # The perturbed candidates are the policy's chunk, moved.
     end = a.candidates[:, :, -1, 2]
-    assert np.allclose(end[:, 2] - end[:, 0], 0.05, atol=1e-6) and np.allclose(end[:, 3] - end[:, 0], -0.05, atol=1e-6)
+    assert np.allclose(end[:, 2] - end[:, 0], 0.05, atol=1e-6) and np.allclose(
+        end[:, 3] - end[:, 0], -0.05, atol=1e-6
+    )
     # The shipped checkpoint picks grid scenes: from the episode's start some candidate succeeds.
     assert (a.outcome[0] == OUTCOMES.index("pick")).any()
     assert "| expert |" in (tmp_path / "a" / "summary.md").read_text()

@@ -77,3 +77,27 @@ def test_sample_and_rerank_keeps_the_policy_sample_the_critic_scores_highest():
     assert r.index.tolist() == scores.argmax(1).tolist()
     assert torch.equal(r.best, chunks[torch.arange(2), scores.argmax(1)])
     assert scores.std() > 0  # the samples differ, so the choice means something
+
+
+def test_selector_makes_select_action_execute_the_critics_choice():
+    from test_rl_modeling import tiny_policy
+
+    from lerobot_bboxpick.rl.rerank import QRerankSelector
+
+    policy = tiny_policy().eval()
+    batch = {k: v[:, -1] for k, v in obs(1).items()}  # one observation, as the env gives it
+    selector = QRerankSelector(RelativeXCritic(), n=6)
+    policy.chunk_selector = selector
+    policy.reset()
+    first = policy.select_action(batch)
+    r = selector.last
+    assert r is not None and r.scores.shape == (1, 6)
+    assert r.index.item() == r.scores.argmax().item()
+    assert torch.equal(first, r.best[:, 0])  # the executed action opens the chosen chunk
+    assert r.scores.std() > 0
+    # the rest of the chunk is queued: no new sampling until n_action_steps actions were taken
+    for t in range(1, policy.config.n_action_steps):
+        assert torch.equal(policy.select_action(batch), r.best[:, t])
+        assert selector.last is r
+    with pytest.raises(ValueError, match="n=0"):
+        QRerankSelector(RelativeXCritic(), n=0)

@@ -94,7 +94,9 @@ class SuiteConfig:
         self.out_dir = Path(self.out_dir)
         self.critic_path = Path(self.critic_path) if self.critic_path is not None else None
         if self.critic_path is not None and not (self.critic_path / "config.json").is_file():
-            raise ValueError(f"critic_path={self.critic_path} is not a critic checkpoint folder (no config.json)")
+            raise ValueError(
+                f"critic_path={self.critic_path} is not a critic checkpoint folder (no config.json)"
+            )
         for name, minimum in (
             ("episodes", 1),
             ("workers", 1),
@@ -238,8 +240,12 @@ def load_runner(
             from lerobot_bboxpick.rl.rerank import QRerankSelector
 
             if not hasattr(runner.policy, "chunk_selector"):
-                raise ValueError(f"critic_path: policy {path} ({runner.policy.name}) cannot rerank its chunks")
-            runner.policy.chunk_selector = QRerankSelector(IqlCriticModel.from_pretrained(critic_path), rerank_samples)
+                raise ValueError(
+                    f"critic_path: policy {path} ({runner.policy.name}) cannot rerank its chunks"
+                )
+            runner.policy.chunk_selector = QRerankSelector(
+                IqlCriticModel.from_pretrained(critic_path), rerank_samples
+            )
         _POLICIES[key] = runner
     return _POLICIES[key]
 

@@ -26,8 +26,6 @@ and ``summary.md`` (pick rate per candidate kind and setting). An interrupted ru
 file exists are skipped (the config must match, or ``--fresh=true``).
 """
 
-from __future__ import annotations
-
 import copy
 import hashlib
 import json
@@ -331,7 +329,7 @@ class CounterfactualPoints:
         """(P, 10) the latest observed TCP pose: what relative chunks are relative to."""
         return self.state[:, -1]
 
-    def subset(self, mask: np.ndarray) -> CounterfactualPoints:
+    def subset(self, mask: np.ndarray) -> "CounterfactualPoints":
         """The rows ``mask`` selects."""
         return CounterfactualPoints(
             **{k: getattr(self, k)[mask] for k in self.__dataclass_fields__ if k != "kinds"},
@@ -357,7 +355,9 @@ def load_points(out_dir: str | Path) -> CounterfactualPoints:
             parts.setdefault("seed", []).append(np.full(n, int(z["seed"])))
     if not parts:
         raise FileNotFoundError(f"no branch points in {out_dir / POINTS_DIR}: run bboxpick-counterfactual")
-    return CounterfactualPoints(**{k: np.concatenate(v) for k, v in parts.items()}, kinds=meta["run_key"]["candidates"])
+    return CounterfactualPoints(
+        **{k: np.concatenate(v) for k, v in parts.items()}, kinds=meta["run_key"]["candidates"]
+    )
 
 
 def summary_table(points: CounterfactualPoints) -> str:
@@ -365,7 +365,9 @@ def summary_table(points: CounterfactualPoints) -> str:
     settings = sorted(set(points.setting.tolist()))
     pick = OUTCOMES.index("pick")
     wrong = OUTCOMES.index("wrong")
-    head = "| candidate | Pick (all) | Wrong (all) | mean return | " + " | ".join(f"Pick {s}" for s in settings)
+    head = "| candidate | Pick (all) | Wrong (all) | mean return | " + " | ".join(
+        f"Pick {s}" for s in settings
+    )
     lines = [head + " |", "|" + "---|" * (4 + len(settings))]
     for c, kind in enumerate(points.kinds):
         o = points.outcome[:, c]
@@ -418,7 +420,13 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
             path = cfg.out_dir / POINTS_DIR / f"{setting}_seed{cfg.seed_start + k}.npz"
             if not path.is_file():
                 tasks.append(
-                    {"cfg": cfg, "setting": setting, "seed": cfg.seed_start + k, "path": str(path), "threads": threads}
+                    {
+                        "cfg": cfg,
+                        "setting": setting,
+                        "seed": cfg.seed_start + k,
+                        "path": str(path),
+                        "threads": threads,
+                    }
                 )
     total = len(cfg.setting_list) * cfg.episodes
     with tqdm(total=total, initial=total - len(tasks), desc="counterfactual", unit="ep") as bar:

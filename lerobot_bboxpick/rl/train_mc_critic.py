@@ -17,8 +17,6 @@ critic ranks first with the policy's own chunk and with the best candidate, and 
 (``verify.action_sensitivity``) next to the *true* sensitivity the branches measured.
 """
 
-from __future__ import annotations
-
 import json
 import logging
 import math
@@ -76,7 +74,9 @@ class TrainMcCriticConfig:
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction={self.val_fraction} must be in [0, 1)")
         if not self.critic.freeze_encoder:
-            raise ValueError("critic.freeze_encoder=false is not supported here: the encoder stays the policy's")
+            raise ValueError(
+                "critic.freeze_encoder=false is not supported here: the encoder stays the policy's"
+            )
 
 
 def policy_columns(kinds: list[str]) -> np.ndarray:
@@ -86,11 +86,15 @@ def policy_columns(kinds: list[str]) -> np.ndarray:
 
 def split_by_episode(points: CounterfactualPoints, fraction: float, seed: int) -> np.ndarray:
     """Held-out mask over points: every point of ``round(fraction * episodes)`` episodes."""
-    episodes = sorted({(s, int(x)) for s, x in zip(points.setting.tolist(), points.seed.tolist(), strict=True)})
+    episodes = sorted(
+        {(s, int(x)) for s, x in zip(points.setting.tolist(), points.seed.tolist(), strict=True)}
+    )
     rng = np.random.default_rng(seed)
     n_val = int(math.floor(fraction * len(episodes) + 0.5))
     chosen = {episodes[i] for i in rng.permutation(len(episodes))[:n_val]}
-    return np.array([(s, int(x)) in chosen for s, x in zip(points.setting.tolist(), points.seed.tolist(), strict=True)])
+    return np.array(
+        [(s, int(x)) in chosen for s, x in zip(points.setting.tolist(), points.seed.tolist(), strict=True)]
+    )
 
 
 def relative_candidates(points: CounterfactualPoints) -> np.ndarray:
@@ -101,7 +105,9 @@ def relative_candidates(points: CounterfactualPoints) -> np.ndarray:
 
 
 @torch.no_grad()
-def point_features(model: IqlCriticModel, points: CounterfactualPoints, batch_size: int, progress: bool) -> Tensor:
+def point_features(
+    model: IqlCriticModel, points: CounterfactualPoints, batch_size: int, progress: bool
+) -> Tensor:
     """State features (P, D) of every branch point, through the policy's encoder."""
     out = []
     for i in tqdm(range(0, len(points), batch_size), desc="encoding points", disable=not progress):
@@ -129,8 +135,15 @@ def rerank_evaluation(q: np.ndarray, points: CounterfactualPoints) -> dict:
     pick = points.outcome == OUTCOMES.index("pick")
     wrong = points.outcome == OUTCOMES.index("wrong")
     rows = np.arange(len(points))
-    out = {"points": len(points), "policy_pick": float(pick[:, 0].mean()), "policy_wrong": float(wrong[:, 0].mean())}
-    for name, cols in (("all", np.arange(points.candidates.shape[1])), ("policy_draws", policy_columns(points.kinds))):
+    out = {
+        "points": len(points),
+        "policy_pick": float(pick[:, 0].mean()),
+        "policy_wrong": float(wrong[:, 0].mean()),
+    }
+    for name, cols in (
+        ("all", np.arange(points.candidates.shape[1])),
+        ("policy_draws", policy_columns(points.kinds)),
+    ):
         chosen = cols[q[:, cols].argmax(1)]
         out[name] = {
             "candidates": len(cols),
@@ -187,7 +200,14 @@ def sweep_states(points: CounterfactualPoints, rel: np.ndarray) -> SweepStates:
     )
 
 
-def _fit(cfg: TrainMcCriticConfig, model: IqlCriticModel, feats: Tensor, rel: np.ndarray, points: CounterfactualPoints, train_rows: np.ndarray) -> list[dict]:
+def _fit(
+    cfg: TrainMcCriticConfig,
+    model: IqlCriticModel,
+    feats: Tensor,
+    rel: np.ndarray,
+    points: CounterfactualPoints,
+    train_rows: np.ndarray,
+) -> list[dict]:
     from diffusers.optimization import get_cosine_schedule_with_warmup
 
     pc = policy_columns(points.kinds)
@@ -224,31 +244,60 @@ def _fit(cfg: TrainMcCriticConfig, model: IqlCriticModel, feats: Tensor, rel: np
     return history
 
 
+def _row(*cells: object) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
 def markdown_report(report: dict) -> str:
     """The report as markdown."""
-    lines = [f"# Monte-Carlo critic on counterfactual branches\n\nData: `{report['data_dir']}`, {report['points']} branch points "
-             f"({report['train_points']} train / {report['val_points']} held-out, split by episode), "
-             f"{len(report['kinds'])} candidates each: {', '.join(report['kinds'])}.\n",
-             "## Reranking on held-out points\n",
-             "| choice set | candidates | argmax-Q picks | argmax-Q wrong | policy's own chunk picks | best candidate picks | mean candidate picks |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Monte-Carlo critic on counterfactual branches\n",
+        f"Data: `{report['data_dir']}`, {report['points']} branch points ({report['train_points']} train / "
+        f"{report['val_points']} held out, split by episode), {len(report['kinds'])} candidates each: "
+        f"{', '.join(report['kinds'])}.\n",
+        "## Reranking on held-out points\n",
+        _row("choice set", "candidates", "argmax-Q picks", "argmax-Q wrong", "policy's chunk picks")
+        + " best candidate picks | mean candidate picks |",
+        "|---|---|---|---|---|---|---|",
+    ]
     r = report["val_rerank"]
     for name in ("policy_draws", "all"):
         x = r[name]
-        lines.append(f"| {name} | {x['candidates']} | {x['chosen_pick']:.0%} | {x['chosen_wrong']:.0%} | {r['policy_pick']:.0%} | "
-                     f"{x['best_possible_pick']:.0%} | {x['mean_candidate_pick']:.0%} |")
-    lines += ["\n## Action sensitivity (held-out points)\n",
-              "| axis | true return change (branches) | true ratio | critic Q change (+-8 cm sweep, test B) | critic ratio |",
-              "|---|---|---|---|---|"]
+        lines.append(
+            _row(
+                name,
+                x["candidates"],
+                f"{x['chosen_pick']:.0%}",
+                f"{x['chosen_wrong']:.0%}",
+                f"{r['policy_pick']:.0%}",
+                f"{x['best_possible_pick']:.0%}",
+                f"{x['mean_candidate_pick']:.0%}",
+            )
+        )
+    lines += [
+        "\n## Action sensitivity (held-out points)\n",
+        _row("axis", "true return change (branches)", "true ratio", "critic Q change (+-8 cm, test B)")
+        + " critic ratio |",
+        "|---|---|---|---|---|",
+    ]
     t, b = report["true_sensitivity"], report["test_b"]
-    for axis in ("x", "y", "z"):
-        ta = t["axes"].get(axis, {})
-        ba = b["axes"][axis]
-        lines.append(f"| {axis} | {ta.get('ret_change', float('nan')):.3f} (+-{ta.get('amount', '?')}) | {ta.get('ratio', float('nan')):.2f} | "
-                     f"{ba['q_change']:.3f} | {ba['ratio']:.2f} |")
-    lines.append(f"\nAcross-state std: returns {t['state_std']:.3f}, critic Q {b['state_std']:.3f}. "
-                 f"Policy chunk strictly the Q-argmax of its sweep on pre-grasp points: "
-                 f"{'n/a' if b['argmax_match'] is None else format(b['argmax_match'], '.0%')} of {b['n_pregrasp']}.")
+    for axis, ta in t["axes"].items():
+        ba = b["axes"].get(axis)
+        lines.append(
+            _row(
+                axis,
+                f"{ta['ret_change']:.3f} (+-{ta['amount'].lstrip('+')})",
+                f"{ta['ratio']:.2f}",
+                "-" if ba is None else f"{ba['q_change']:.3f}",
+                "-" if ba is None else f"{ba['ratio']:.2f}",
+            )
+        )
+    match = "n/a" if b["argmax_match"] is None else format(b["argmax_match"], ".0%")
+    lines.append(
+        f"\nAcross-state std: returns {t['state_std']:.3f}, critic Q {b['state_std']:.3f}. "
+        f"The policy's chunk is "
+        f"strictly the Q-argmax of its sweep on {match} of {b['n_pregrasp']} pre-grasp points."
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -258,7 +307,9 @@ def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
 
     if cfg.output_dir.exists() and any(cfg.output_dir.iterdir()):
         if not cfg.overwrite:
-            raise FileExistsError(f"output_dir={cfg.output_dir} is not empty; pass --overwrite=true or another folder")
+            raise FileExistsError(
+                f"output_dir={cfg.output_dir} is not empty; pass --overwrite=true or another folder"
+            )
         shutil.rmtree(cfg.output_dir / "checkpoints", ignore_errors=True)
     cfg.output_dir.mkdir(parents=True, exist_ok=True)
     policy_path = cfg.policy_path
@@ -287,9 +338,13 @@ def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
         "val_points": int(is_val.sum()),
         "kinds": points.kinds,
         "val_rerank": rerank_evaluation(q, val),
-        "train_rerank": rerank_evaluation(q_table(model, feats[train_rows], rel[train_rows]), points.subset(~is_val)),
+        "train_rerank": rerank_evaluation(
+            q_table(model, feats[train_rows], rel[train_rows]), points.subset(~is_val)
+        ),
         "true_sensitivity": true_sensitivity(val),
-        "test_b": action_sensitivity(model, feats[val_rows], sweep_states(val, rel[val_rows]), sweep_offsets(0.08, 9)),
+        "test_b": action_sensitivity(
+            model, feats[val_rows], sweep_states(val, rel[val_rows]), sweep_offsets(0.08, 9)
+        ),
         "history": history,
     }
     ckpt = get_step_checkpoint_dir(cfg.output_dir, cfg.steps, cfg.steps)
