@@ -15,7 +15,13 @@ from lerobot_bboxpick.rl.chunk_perturbations import Perturbation
 from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
 from lerobot_bboxpick.rl.counterfactual_dataset import CONFIG_NAME, POINTS_DIR, load_points
 from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
-from lerobot_bboxpick.rl.train_mc_critic import TrainMcCriticConfig, split_by_episode, train_mc_critic
+from lerobot_bboxpick.rl.train_mc_critic import (
+    TrainMcCriticConfig,
+    evaluate_critic,
+    relative_candidates,
+    split_by_episode,
+    train_mc_critic,
+)
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
 KINDS = ["policy", "sample1", "x+0.030", "x-0.030"]
@@ -90,7 +96,7 @@ def test_split_holds_out_whole_episodes(trained):
 
 def test_held_out_argmax_is_the_succeeding_chunk(trained):
     _, report = trained
-    r = report["val_rerank"]
+    r = report["val"]["rerank"]
     assert r["policy_pick"] == 0.0
     assert r["all"]["best_possible_pick"] == 1.0
     assert r["all"]["chosen_pick"] >= 0.85  # the critic learned where to move, per state
@@ -100,11 +106,18 @@ def test_held_out_argmax_is_the_succeeding_chunk(trained):
 def test_true_and_predicted_x_sensitivity_are_high(trained):
     _, report = trained
     assert report["true_sensitivity"]["axes"]["x"]["ret_change"] == pytest.approx(0.99**39)
-    assert report["test_b"]["axes"]["x"]["ratio"] >= 0.5
+    assert report["val"]["test_b"]["axes"]["x"]["ratio"] >= 0.5
     assert "| x |" in (Path(report["checkpoint"]).parents[2] / "mc_report.md").read_text()
 
 
-def test_checkpoint_loads_as_a_critic(trained):
-    _, report = trained
+def test_checkpoint_reloads_to_the_same_evaluation(trained):
+    cfg, report = trained
     model = IqlCriticModel.from_pretrained(report["checkpoint"])
     assert model.horizon == 16 and model.config.state_embed_dim == SMALL_CRITIC["state_embed_dim"]
+    points = load_points(cfg.data_dir)
+    val = points.subset(split_by_episode(points, cfg.val_fraction, cfg.seed))
+    again = evaluate_critic(model, val, relative_candidates(val))
+    assert again["rerank"] == report["val"]["rerank"]
+    assert again["test_b"]["axes"]["x"]["ratio"] == pytest.approx(
+        report["val"]["test_b"]["axes"]["x"]["ratio"]
+    )

@@ -61,6 +61,9 @@ class TrainMcCriticConfig:
     weight_decay: float = 1e-4
     warmup_steps: int = 150
     val_fraction: float = 0.2
+    # Another critic checkpoint (e.g. bboxpick-train-critic's IQL one) evaluated on the same held-out
+    # points, side by side in the report.
+    compare_critic_path: Path | None = None
     seed: int = 0
     embed_batch_size: int = 32
     progress: bool = True
@@ -68,6 +71,8 @@ class TrainMcCriticConfig:
     def __post_init__(self) -> None:
         self.data_dir, self.output_dir = Path(self.data_dir), Path(self.output_dir)
         self.policy_path = Path(self.policy_path) if self.policy_path is not None else None
+        if self.compare_critic_path is not None:
+            self.compare_critic_path = Path(self.compare_critic_path)
         for name in ("steps", "batch_size", "embed_batch_size"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}={getattr(self, name)} must be >= 1")
@@ -244,6 +249,70 @@ def _fit(
     return history
 
 
+def evaluate_critic(
+    model: IqlCriticModel, points: CounterfactualPoints, rel: np.ndarray, feats: Tensor | None = None
+) -> dict:
+    """Reranking and test B of ``model`` on ``points`` (features computed unless given)."""
+    from lerobot_bboxpick.rl.verify import action_sensitivity, sweep_offsets
+
+    if feats is None:
+        feats = point_features(model, points, 32, progress=False)
+    return {
+        "rerank": rerank_evaluation(q_table(model, feats, rel), points),
+        "test_b": action_sensitivity(model, feats, sweep_states(points, rel), sweep_offsets(0.08, 9)),
+    }
+
+
+def comparison_table(report: dict) -> str:
+    """Markdown: test B and reranking of the MC critic, the compared critic and the paper's table 4."""
+    from lerobot_bboxpick.rl.verify import PAPER_TABLE4
+
+    cols = [("MC critic (counterfactual)", report["val"])]
+    if "compare" in report:
+        cols.append((f"compared: `{report['compare']['path']}`", report["compare"]))
+    lines = [
+        _row("held-out points", *(name for name, _ in cols), "paper table 4"),
+        "|---|" + "---|" * (len(cols) + 1),
+    ]
+    for axis in ("x", "y", "z"):
+        lines.append(
+            _row(
+                f"test B ratio {axis}",
+                *(f"{c['test_b']['axes'][axis]['ratio']:.2f}" for _, c in cols),
+                PAPER_TABLE4["ratio"][axis],
+            )
+        )
+        lines.append(
+            _row(
+                f"Q change, +-8 cm {axis}",
+                *(f"{c['test_b']['axes'][axis]['q_change']:.3f}" for _, c in cols),
+                PAPER_TABLE4["q_change"],
+            )
+        )
+    lines.append(
+        _row(
+            "across-state Q std",
+            *(f"{c['test_b']['state_std']:.3f}" for _, c in cols),
+            PAPER_TABLE4["state_std"],
+        )
+    )
+    lines.append(
+        _row(
+            "argmax-Q of all candidates picks",
+            *(f"{c['rerank']['all']['chosen_pick']:.0%}" for _, c in cols),
+            "-",
+        )
+    )
+    lines.append(
+        _row(
+            "argmax-Q of the policy's draws picks",
+            *(f"{c['rerank']['policy_draws']['chosen_pick']:.0%}" for _, c in cols),
+            "-",
+        )
+    )
+    return "\n".join(lines) + "\n"
+
+
 def _row(*cells: object) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
@@ -260,7 +329,7 @@ def markdown_report(report: dict) -> str:
         + " best candidate picks | mean candidate picks |",
         "|---|---|---|---|---|---|---|",
     ]
-    r = report["val_rerank"]
+    r = report["val"]["rerank"]
     for name in ("policy_draws", "all"):
         x = r[name]
         lines.append(
@@ -280,7 +349,7 @@ def markdown_report(report: dict) -> str:
         + " critic ratio |",
         "|---|---|---|---|---|",
     ]
-    t, b = report["true_sensitivity"], report["test_b"]
+    t, b = report["true_sensitivity"], report["val"]["test_b"]
     for axis, ta in t["axes"].items():
         ba = b["axes"].get(axis)
         lines.append(
@@ -298,13 +367,12 @@ def markdown_report(report: dict) -> str:
         f"The policy's chunk is "
         f"strictly the Q-argmax of its sweep on {match} of {b['n_pregrasp']} pre-grasp points."
     )
+    lines += ["\n## Side by side\n", comparison_table(report)]
     return "\n".join(lines) + "\n"
 
 
 def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
     """Train, save like ``bboxpick-train-critic`` does, evaluate; returns the report dict."""
-    from lerobot_bboxpick.rl.verify import action_sensitivity, sweep_offsets
-
     if cfg.output_dir.exists() and any(cfg.output_dir.iterdir()):
         if not cfg.overwrite:
             raise FileExistsError(
@@ -329,7 +397,6 @@ def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
         history = _fit(cfg, model, feats, rel, points, train_rows)
     val = points.subset(is_val) if is_val.any() else points
     val_rows = np.flatnonzero(is_val) if is_val.any() else np.arange(len(points))
-    q = q_table(model, feats[val_rows], rel[val_rows])
     report = {
         "data_dir": str(cfg.data_dir),
         "policy_path": str(policy_path),
@@ -337,16 +404,19 @@ def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
         "train_points": int(len(train_rows)),
         "val_points": int(is_val.sum()),
         "kinds": points.kinds,
-        "val_rerank": rerank_evaluation(q, val),
+        "val": evaluate_critic(model, val, rel[val_rows], feats[val_rows]),
         "train_rerank": rerank_evaluation(
             q_table(model, feats[train_rows], rel[train_rows]), points.subset(~is_val)
         ),
         "true_sensitivity": true_sensitivity(val),
-        "test_b": action_sensitivity(
-            model, feats[val_rows], sweep_states(val, rel[val_rows]), sweep_offsets(0.08, 9)
-        ),
         "history": history,
     }
+    if cfg.compare_critic_path is not None:
+        other = IqlCriticModel.from_pretrained(cfg.compare_critic_path)
+        report["compare"] = {
+            "path": str(cfg.compare_critic_path),
+            **evaluate_critic(other, val, rel[val_rows]),
+        }
     ckpt = get_step_checkpoint_dir(cfg.output_dir, cfg.steps, cfg.steps)
     pretrained = ckpt / PRETRAINED_MODEL_DIR
     model.save_pretrained(pretrained)
