@@ -68,3 +68,20 @@ def test_bad_fraction_and_kind_are_refused(env):
     env.reset(seed=0)
     with pytest.raises(ValueError, match="valid kinds: offset, failed_grasp"):
         lead_in_actions(env, "spin", np.random.default_rng(0))
+
+
+def test_resuming_with_another_recovery_fraction_is_refused(tmp_path):
+    import json
+
+    from lerobot_bboxpick.data.collect import CollectConfig, ExpertRecorder, check_resumable
+    from lerobot_bboxpick.data.recovery import RecoveryRecorder
+
+    cfg = CollectConfig(root=tmp_path / "ds", resume=True)
+    shard = cfg.work_dir / "shard_00000000"
+    shard.mkdir(parents=True)
+    recorded = RecoveryRecorder(fraction=0.3).run_key
+    (shard / "seeds.json").write_text(json.dumps([{"seed": 0, "kept": True, "run_key": recorded}]))
+    check_resumable(cfg, RecoveryRecorder(fraction=0.3).run_key)  # the same run resumes
+    for other in (RecoveryRecorder(fraction=0.5), ExpertRecorder()):
+        with pytest.raises(ValueError, match=r"recorded as \{'recovery': 0.3\}.*choose another --root"):
+            check_resumable(cfg, other.run_key)

@@ -11,9 +11,10 @@ import pytest
 from helpers_cli import cli_env
 from test_suite import _random_checkpoint
 
+from lerobot_bboxpick.data.collect import check_resumable
 from lerobot_bboxpick.data.features import EPISODE_OUTCOME
 from lerobot_bboxpick.data.replay import episode_arrays, load_dataset
-from lerobot_bboxpick.data.rollouts import RolloutsConfig, check_resumable, episode_stats, record_rollouts
+from lerobot_bboxpick.data.rollouts import RolloutsConfig, episode_stats, record_rollouts
 from lerobot_bboxpick.sim.layouts import SETTINGS
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 

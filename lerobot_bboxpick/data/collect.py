@@ -279,6 +279,19 @@ def attempted(work_dir: Path) -> list[dict]:
     return [r for shard in finished_shards(work_dir) for r in json.loads((shard / "seeds.json").read_text())]
 
 
+def check_resumable(cfg: CollectConfig, key: dict | None) -> None:
+    """Refuse to add episodes of another recorder (another checkpoint, options or recovery fraction) to
+    shards already recorded: a dataset must not mix them unnoticed."""
+    stale = [r for r in attempted(cfg.work_dir) if r.get("run_key") != key]
+    if stale:
+        raise ValueError(
+            f"root={cfg.root}: {len(stale)} episodes in {cfg.work_dir} were recorded as "
+            f"{stale[0].get('run_key', '(no run key: plain expert demos)')}, but this run is "
+            f"{key if key is not None else '(no run key: plain expert demos)'}; choose another --root "
+            "(or the same recorder and options)"
+        )
+
+
 def aggregate_roots(repo_id: str, roots: Sequence[Path], dest: Path) -> int:
     """LeRobot's ``aggregate_datasets`` of the datasets at ``roots`` (in that order) into ``dest``, built in
     a temporary folder and swapped in whole; returns the episode count."""
@@ -331,6 +344,7 @@ def collect(
     print(f"collect: workers' own output (video encoder) -> {cfg.log_file}", flush=True)
     for stale in cfg.work_dir.glob("*.partial"):  # an interrupted shard: redo it
         shutil.rmtree(stale)
+    check_resumable(cfg, recorder.run_key)
     records = attempted(cfg.work_dir)
     kept = sum(r["kept"] for r in records)
     next_seed = max([cfg.seed_start - 1] + [r["seed"] for r in records]) + 1

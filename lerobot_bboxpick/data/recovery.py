@@ -78,6 +78,11 @@ class RecoveryRecorder(ExpertRecorder):
         if not 0.0 <= self.fraction <= 1.0:
             raise ValueError(f"recovery={self.fraction!r} must be a fraction in [0, 1]")
 
+    @property
+    def run_key(self) -> dict:
+        """The fraction decides which seeds are recoveries: a resumed collection must keep it."""
+        return {"recovery": self.fraction}
+
     def __call__(self, env: Any, seed: int) -> tuple[list[dict], str]:
         """The seed's episode: a plain expert demo, or a lead-in (not recorded) and the recovery."""
         rng = np.random.default_rng([int(seed), 0x5EC0])  # its own stream: the scene's is untouched

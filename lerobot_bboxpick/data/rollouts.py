@@ -42,7 +42,6 @@ from lerobot_bboxpick.data.collect import (
     SHARD_SIZE,
     CollectConfig,
     EpisodeRecorder,
-    attempted,
     close_episode,
     collect,
     step_frame,
@@ -203,23 +202,10 @@ def policy_recorder(cfg: RolloutsConfig) -> PolicyRecorder:
     )
 
 
-def check_resumable(collect_cfg: CollectConfig, key: dict) -> None:
-    """Refuse to add episodes of another checkpoint or options to shards already recorded."""
-    stale = [r for r in attempted(collect_cfg.work_dir) if r.get("run_key") != key]
-    if stale:
-        raise ValueError(
-            f"root={collect_cfg.root}: {len(stale)} episodes in {collect_cfg.work_dir} were recorded as "
-            f"{stale[0].get('run_key', '(no run key: not rollouts of a policy)')}, but this run is {key}; "
-            "choose another --root (or the same checkpoint and options)"
-        )
-
-
 def record_rollouts(cfg: RolloutsConfig) -> dict:
     """Record (or resume) the rollouts, merge, aggregate into ``cfg.root``; returns a summary."""
     collect_cfg = cfg.collect_config()
     recorder = policy_recorder(cfg)
-    if cfg.resume:
-        check_resumable(collect_cfg, recorder.run_key or {})
     merge_with = [cfg.merge_with] if cfg.merge_with is not None else []
     summary = collect(collect_cfg, recorder=recorder, merge_with=merge_with)
     summary["merged_with"] = str(cfg.merge_with) if cfg.merge_with is not None else None
