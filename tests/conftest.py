@@ -15,3 +15,15 @@ def grid_env():
     env = LegoPickEnv(setting="grid_id", terminate_on_lift=False)
     yield env
     env.close()
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """The dashboard tests' scene (``helpers_dashboard``) in an env of its own: the numbers (boxes,
+    pixels, poses) the dashboard's scene is checked against."""
+    from helpers_dashboard import SEED, SETTING
+
+    env = LegoPickEnv(setting=SETTING)
+    env.reset(seed=SEED)
+    yield env
+    env.close()

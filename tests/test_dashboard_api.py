@@ -22,6 +22,7 @@ import httpx2
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from helpers_dashboard import SEED, SETTING
 from tiny_policy import save_tiny_policy
 
 from lerobot_bboxpick.apps.dashboard.box_picker import create_picker_app
@@ -36,7 +37,6 @@ from lerobot_bboxpick.sim.env import LegoPickEnv
 from lerobot_bboxpick.sim.layouts import SETTINGS
 from lerobot_bboxpick.sim.scene import N_BRICKS
 
-SETTING, SEED = "grid_id", 3
 PAD = 1.0 / 224  # one pixel: a drawn box a little looser than the brick's own box
 
 
@@ -46,15 +46,6 @@ def checkpoints(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("checkpoints")
     save_tiny_policy(root / "runs" / "tiny", seed=0)
     return root
-
-
-@pytest.fixture(scope="module")
-def reference() -> Iterator[LegoPickEnv]:
-    """An env of its own, to check the dashboard's scene against the env's numbers."""
-    env = LegoPickEnv(setting=SETTING)
-    env.reset(seed=SEED)
-    yield env
-    env.close()
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers_dashboard import SEED, SETTING
 from tiny_policy import save_tiny_policy
 
 from lerobot_bboxpick.apps.dashboard.box_picker import pick_box_in_browser
@@ -40,7 +41,6 @@ CHROMIUM_ARGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
-SETTING, SEED = "grid_id", 3
 CANVAS = 448  # CSS px of the wrist canvas (index.html)
 VIEWPORT = {"width": 1400, "height": 1000}
 
@@ -72,15 +72,6 @@ def dashboard(
     yield session, server
     server.stop()
     session.close()
-
-
-@pytest.fixture(scope="module")
-def reference() -> Iterator[LegoPickEnv]:
-    """The test scene in an env of its own: where each brick's box and pixels are."""
-    env = LegoPickEnv(setting=SETTING)
-    env.reset(seed=SEED)
-    yield env
-    env.close()
 
 
 @pytest.fixture
