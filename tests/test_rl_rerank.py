@@ -101,3 +101,29 @@ def test_selector_makes_select_action_execute_the_critics_choice():
         assert selector.last is r
     with pytest.raises(ValueError, match="n=0"):
         QRerankSelector(RelativeXCritic(), n=0)
+
+
+def test_selector_residuals_are_scored_and_can_win():
+    from test_rl_modeling import tiny_policy
+
+    from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
+    from lerobot_bboxpick.rl.rerank import QRerankSelector
+
+    policy = tiny_policy().eval()
+    batch = obs(1)
+    selector = QRerankSelector(RelativeXCritic(), n=2, perturbations=parse_perturbations("x:0.05,yaw:0.3"))
+    assert selector.candidates_per_state == 10
+    best = selector(policy, batch, torch.Generator().manual_seed(0))
+    r = selector.last
+    assert r.scores.shape == (1, 10)
+    # Q = relative x of the first pose; the +x residual moves the first pose a little forward (ramp), so
+    # the best candidate is a draw's x+0.05 residual (index 1 or 6), not a bare draw.
+    assert r.index.item() in (1, 6)
+    assert torch.equal(best, r.best)
+    # the chosen chunk is its draw moved 5 cm along world x at the chunk's end, the rest unchanged
+    repeated = {k: v.repeat_interleave(2, dim=0) for k, v in batch.items()}
+    draws = policy.predict_action_chunk(repeated, generator=torch.Generator().manual_seed(0))
+    draw = draws[r.index.item() // 5]
+    delta = best[0] - draw
+    assert delta[-1, 0].item() == pytest.approx(0.05, abs=1e-5)
+    assert delta[:, 1:].abs().max().item() < 1e-5

@@ -80,6 +80,9 @@ class SuiteConfig:
     # draws, scored by this critic checkpoint (bboxpick-train-critic / bboxpick-train-mc-critic).
     critic_path: Path | None = None
     rerank_samples: int = 8
+    # Bounded residuals added to every draw before reranking, <axis>:<amount> tried with + and - (e.g.
+    # "yaw:0.35,x:0.03"; rl.chunk_perturbations); empty: the policy's draws only.
+    rerank_perturbations: str = ""
     # The bbox the policy sees: oracle, noisy or tracked (see the module docstring).
     bbox_source: str = "oracle"
     # Target IoU of the noisy bbox with the oracle one.
@@ -111,6 +114,10 @@ class SuiteConfig:
             value = getattr(self, name)
             if value is not None and (not isinstance(value, int) or value < 1):
                 raise ValueError(f"{name}={value!r} must be an integer >= 1 (or unset: the checkpoint's)")
+        if self.rerank_perturbations:
+            from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
+
+            parse_perturbations(self.rerank_perturbations, "rerank_perturbations")
         check_bbox_source(self.bbox_source)
         check_ray(self.ray_address)
         if not 0.0 < self.noisy_iou <= 1.0:
@@ -174,6 +181,8 @@ def run_key(cfg: SuiteConfig, path: str) -> dict:
         if cfg.critic_path is not None:
             key["critic"] = weights_digest(str(cfg.critic_path))
             key["rerank_samples"] = cfg.rerank_samples
+            if cfg.rerank_perturbations:
+                key["rerank_perturbations"] = cfg.rerank_perturbations
     return key
 
 
@@ -221,14 +230,16 @@ def load_runner(
     num_inference_steps: int | None = None,
     critic_path: str | None = None,
     rerank_samples: int = 1,
+    rerank_perturbations: str = "",
 ) -> Any:
     """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept;
-    with ``critic_path`` its chunks are Q-reranked among ``rerank_samples`` draws."""
+    with ``critic_path`` its chunks are Q-reranked among ``rerank_samples`` draws (and their
+    ``rerank_perturbations`` residuals)."""
     from lerobot_bboxpick.eval.rollout import ExpertRunner, PolicyRunner
 
     if path == EXPERT:
         return ExpertRunner(env)
-    key = (path, n_action_steps, num_inference_steps, critic_path, rerank_samples)
+    key = (path, n_action_steps, num_inference_steps, critic_path, rerank_samples, rerank_perturbations)
     if key not in _POLICIES:
         _POLICIES.clear()  # one checkpoint in memory per worker at a time
         with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights ..." per load
@@ -236,6 +247,7 @@ def load_runner(
                 path, n_action_steps=n_action_steps, num_inference_steps=num_inference_steps
             )
         if critic_path is not None:
+            from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
             from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
             from lerobot_bboxpick.rl.rerank import QRerankSelector
 
@@ -244,7 +256,9 @@ def load_runner(
                     f"critic_path: policy {path} ({runner.policy.name}) cannot rerank its chunks"
                 )
             runner.policy.chunk_selector = QRerankSelector(
-                IqlCriticModel.from_pretrained(critic_path), rerank_samples
+                IqlCriticModel.from_pretrained(critic_path),
+                rerank_samples,
+                parse_perturbations(rerank_perturbations, "rerank_perturbations"),
             )
         _POLICIES[key] = runner
     return _POLICIES[key]
@@ -275,6 +289,7 @@ def run_episode(task: dict) -> dict:
         task.get("num_inference_steps"),
         task.get("critic_path"),
         task.get("rerank_samples", 1),
+        task.get("rerank_perturbations", ""),
     )
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
@@ -326,6 +341,7 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, di
                         "num_inference_steps": cfg.num_inference_steps,
                         "critic_path": str(cfg.critic_path) if cfg.critic_path else None,
                         "rerank_samples": cfg.rerank_samples,
+                        "rerank_perturbations": cfg.rerank_perturbations,
                         "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
                         "frame": str(frame_path(cfg.out_dir, label, setting, seed)),

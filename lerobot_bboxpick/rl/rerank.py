@@ -9,9 +9,10 @@ policy's absolute chunks and an observation batch; ``sample_and_rerank`` draws t
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -78,20 +79,40 @@ def sample_and_rerank(
 
 class QRerankSelector:
     """A ``bbox_diffusion`` chunk selector (``policy.chunk_selector``): sample ``n`` chunks from the
-    policy and execute the argmax-Q one.
+    policy, optionally add bounded per-axis residuals of each (``perturbations``, ramped in over the
+    chunk: ``rl.chunk_perturbations``), and execute the argmax-Q candidate.
 
-    The trust region is the policy's own distribution: every executed chunk is one the imitation policy
-    could have drawn itself, so the critic only has to rank the policy's proposals, not to extrapolate
-    to actions no dataset showed it (where the paper's critics were flat or wrong).
+    The trust region is the policy's own distribution, widened by at most the residuals' size: every
+    executed chunk is one the imitation policy could have drawn itself, or such a chunk moved by a few
+    centimetres or degrees at its end, so the critic only ranks candidates near the data it was trained
+    on (``bboxpick-counterfactual`` tries exactly these residuals), never ones far from it.
     """
 
-    def __init__(self, critic, n: int) -> None:
+    def __init__(self, critic, n: int, perturbations: Sequence = ()) -> None:
         if n < 1:
             raise ValueError(f"rerank samples n={n} must be >= 1")
-        self.critic, self.n = critic, n
+        self.critic, self.n, self.perturbations = critic, n, tuple(perturbations)
         self.last: RerankResult | None = None  # the latest choice, for diagnostics
+
+    @property
+    def candidates_per_state(self) -> int:
+        """Draws times (1 + residuals)."""
+        return self.n * (1 + len(self.perturbations))
+
+    def _with_residuals(self, draws: Tensor) -> Tensor:
+        """(B, n, H, 10) draws -> (B, n * (1 + P), H, 10): each draw, then its residuals."""
+        if not self.perturbations:
+            return draws
+        arr = draws.double().cpu().numpy()
+        out = [[d] + [p.apply(d) for p in self.perturbations] for row in arr for d in row]
+        stacked = torch.from_numpy(np.asarray(out)).to(draws.dtype)
+        return stacked.view(draws.shape[0], self.candidates_per_state, *draws.shape[2:])
 
     def __call__(self, policy, stacked: dict[str, Tensor], generator: torch.Generator | None) -> Tensor:
         """The chosen absolute chunk ``(B, H, 10)`` for observations ``stacked``."""
-        self.last = sample_and_rerank(policy, self.critic, stacked, self.n, generator=generator)
+        b = stacked[STATE].shape[0]
+        repeated = {k: v.repeat_interleave(self.n, dim=0) for k, v in stacked.items()}
+        draws = policy.predict_action_chunk(repeated, generator=generator)
+        candidates = self._with_residuals(draws.view(b, self.n, *draws.shape[1:]))
+        self.last = rerank_absolute(self.critic, stacked, candidates)
         return self.last.best
