@@ -48,3 +48,12 @@ bboxpick-suite --policies=rerank_draws_mc2=$CKPT --settings=$SETTINGS --episodes
     --rerank_samples=4 --out_dir=outputs/val_cf/rerank_draws_mc2
 mkdir -p docs/counterfactual/val_cf/rerank_draws_mc2
 cp outputs/val_cf/rerank_draws_mc2/{table.md,table.csv,episodes.jsonl,outcomes.png} docs/counterfactual/val_cf/rerank_draws_mc2/
+
+# 6. The paper's Q-reranking with the paper's critic (IQL), for comparison: validation, then test seeds.
+for split in "val_cf 5000" "test_cf 10000"; do
+    set -- $split
+    bboxpick-suite --policies=rerank_draws_iql=$CKPT --settings=$SETTINGS --episodes=30 --seed_start=$2 --videos=0 \
+        --num_inference_steps=4 --workers=2 --critic_path=$IQL --rerank_samples=4 --out_dir=outputs/$1/rerank_draws_iql
+    mkdir -p docs/counterfactual/$1/rerank_draws_iql
+    cp outputs/$1/rerank_draws_iql/{table.md,table.csv,episodes.jsonl,outcomes.png} docs/counterfactual/$1/rerank_draws_iql/
+done
