@@ -84,3 +84,41 @@ def test_collection_on_ray_equals_the_local_one(tmp_path):
         assert a["seed"] == b["seed"] == e and a["setting"] == b["setting"]
         for key in ("actions", "states", "bboxes"):
             np.testing.assert_allclose(b[key], a[key], rtol=0, atol=1e-6, err_msg=f"episode {e} {key}")
+
+
+@pytest.mark.slow
+def test_counterfactual_branches_on_ray_equal_the_local_ones(tmp_path):
+    pytest.importorskip("ray")
+    from pathlib import Path
+
+    from lerobot_bboxpick.rl.counterfactual_dataset import (
+        CounterfactualConfig,
+        load_points,
+        run_counterfactual,
+    )
+
+    shipped = Path(__file__).resolve().parents[1] / "examples" / "bbox_diffusion_lego_pick"
+    points = {}
+    for name, address in (("local", None), ("ray", "local")):
+        cfg = CounterfactualConfig(
+            policy_path=shipped,
+            settings="grid_id",
+            episodes=2,
+            seed_start=7,
+            max_points=1,
+            samples=1,
+            perturbations="",
+            expert=False,
+            max_steps=40,
+            workers=2,  # the same threads per worker on both pools
+            ray_address=address,
+            out_dir=tmp_path / name,
+        )
+        run_counterfactual(cfg)
+        points[name] = load_points(cfg.out_dir)
+    local, on_ray = points["local"], points["ray"]
+    assert len(local) == len(on_ray) == 2 and local.kinds == ["policy", "sample1"]
+    assert on_ray.seed.tolist() == local.seed.tolist() == [7, 8]
+    for key in ("image", "state", "outcome", "steps", "ret"):
+        np.testing.assert_array_equal(getattr(on_ray, key), getattr(local, key), err_msg=key)
+    np.testing.assert_allclose(on_ray.candidates, local.candidates, rtol=0, atol=1e-6)

@@ -24,6 +24,7 @@ from lerobot_bboxpick.rl.train_mc_critic import (
 )
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
+pytestmark = pytest.mark.slow  # trains a critic (~40 s) for the module
 KINDS = ["policy", "sample1", "x+0.030", "x-0.030"]
 BASE = np.array([0.5, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.07])  # tool down, tcp x = world x
 
