@@ -85,20 +85,26 @@ def test_seeds_outside_training_are_refused(tmp_path):
         CounterfactualConfig(policy_path=SHIPPED, seed_start=5000, episodes=2, out_dir=tmp_path)
 
 
+def small_config(out_dir: Path, **overrides) -> CounterfactualConfig:
+    """A counterfactual run small enough for a test: one grid_id episode of the shipped checkpoint."""
+    options = {
+        "policy_path": SHIPPED,
+        "settings": "grid_id",
+        "episodes": 1,
+        "seed_start": 7,
+        "branch_every": 2,
+        "max_points": 2,
+        "samples": 1,
+        "perturbations": "z:0.05",
+        "max_steps": 180,
+        "workers": 1,
+        "out_dir": out_dir,
+    }
+    return CounterfactualConfig(**{**options, **overrides})
+
+
 def _run(out_dir: Path) -> CounterfactualConfig:
-    cfg = CounterfactualConfig(
-        policy_path=SHIPPED,
-        settings="grid_id",
-        episodes=1,
-        seed_start=7,
-        branch_every=2,
-        max_points=2,
-        samples=1,
-        perturbations="z:0.05",
-        max_steps=180,
-        workers=1,
-        out_dir=out_dir,
-    )
+    cfg = small_config(out_dir)
     run_counterfactual(cfg)
     return cfg
 

@@ -89,30 +89,21 @@ def test_collection_on_ray_equals_the_local_one(tmp_path):
 @pytest.mark.slow
 def test_counterfactual_branches_on_ray_equal_the_local_ones(tmp_path):
     pytest.importorskip("ray")
-    from pathlib import Path
+    from test_counterfactual_dataset import small_config
 
-    from lerobot_bboxpick.rl.counterfactual_dataset import (
-        CounterfactualConfig,
-        load_points,
-        run_counterfactual,
-    )
+    from lerobot_bboxpick.rl.counterfactual_dataset import load_points, run_counterfactual
 
-    shipped = Path(__file__).resolve().parents[1] / "examples" / "bbox_diffusion_lego_pick"
     points = {}
     for name, address in (("local", None), ("ray", "local")):
-        cfg = CounterfactualConfig(
-            policy_path=shipped,
-            settings="grid_id",
+        cfg = small_config(
+            tmp_path / name,
             episodes=2,
-            seed_start=7,
             max_points=1,
-            samples=1,
             perturbations="",
             expert=False,
             max_steps=40,
             workers=2,  # the same threads per worker on both pools
             ray_address=address,
-            out_dir=tmp_path / name,
         )
         run_counterfactual(cfg)
         points[name] = load_points(cfg.out_dir)
