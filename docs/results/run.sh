@@ -73,6 +73,12 @@ if want practical_oracle; then
   publish outputs/main/practical/suite_shipped practical_oracle
   cp outputs/main/practical/train/sizing.json docs/results/practical_oracle/
 fi
+# The shipped checkpoint with the tracker's box (the first frame's oracle box, then the tracker).
+if want practical_tracked; then
+  bboxpick-suite --policies=practical=examples/bbox_diffusion_lego_pick --bbox_source=tracked --episodes=30 \
+    --videos=1 --out_dir=outputs/main/practical/suite_tracked
+  publish outputs/main/practical/suite_tracked practical_tracked
+fi
 if want validation_inference_steps; then
   for n in 16 8 4; do
     bboxpick-suite --policies=steps$n=examples/bbox_diffusion_lego_pick --num_inference_steps=$n \
