@@ -26,6 +26,7 @@ and ``summary.md`` (pick rate per candidate kind and setting). An interrupted ru
 file exists are skipped (the config must match, or ``--fresh=true``).
 """
 
+import contextlib
 import copy
 import hashlib
 import json
@@ -47,6 +48,7 @@ from lerobot_bboxpick.parallel import check_ray, worker_pool
 from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
 from lerobot_bboxpick.rl.counterfactual import restore, run_branch, snapshot
 from lerobot_bboxpick.rl.critic_dataset import GROUP_OF_OUTCOME, CriticDataConfig
+from lerobot_bboxpick.rl.rerank import sample_chunks
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
@@ -203,8 +205,7 @@ class EpisodeBrancher:
         out = [chunk]
         if self.cfg.samples:
             gen = torch.Generator().manual_seed(_derived_seed(self.seed, point, 1))
-            repeated = {k: v.repeat_interleave(self.cfg.samples, dim=0) for k, v in stacked.items()}
-            out += list(policy.predict_action_chunk(repeated, generator=gen).double().numpy())
+            out += list(sample_chunks(policy, stacked, self.cfg.samples, gen)[0].double().numpy())
         out += [p.apply(chunk) for p in self.perturbations]
         if self.cfg.expert:
             from lerobot_bboxpick.sim.expert import ScriptedExpert
@@ -429,17 +430,19 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
                     }
                 )
     total = len(cfg.setting_list) * cfg.episodes
-    with tqdm(total=total, initial=total - len(tasks), desc="counterfactual", unit="ep") as bar:
-        if cfg.workers == 1 and not cfg.ray_address:
-            results = (branch_episode(t) for t in tasks)
-            for r in results:
-                bar.set_postfix_str(f"{r['setting']} seed {r['seed']}: {r['points']} points")
-                bar.update()
-        else:
-            with worker_pool(cfg.workers, cfg.ray_address, maxtasksperchild=None) as pool:
-                for r in pool.imap_unordered(branch_episode, tasks, chunksize=1):
-                    bar.set_postfix_str(f"{r['setting']} seed {r['seed']}: {r['points']} points")
-                    bar.update()
+    local = cfg.workers == 1 and not cfg.ray_address
+    with (
+        tqdm(total=total, initial=total - len(tasks), desc="counterfactual", unit="ep") as bar,
+        contextlib.nullcontext()
+        if local
+        else worker_pool(cfg.workers, cfg.ray_address, maxtasksperchild=None) as pool,
+    ):
+        results = (
+            map(branch_episode, tasks) if local else pool.imap_unordered(branch_episode, tasks, chunksize=1)
+        )
+        for r in results:
+            bar.set_postfix_str(f"{r['setting']} seed {r['seed']}: {r['points']} points")
+            bar.update()
     summary = cfg.out_dir / "summary.md"
     summary.write_text(summary_table(load_points(cfg.out_dir)))
     return summary

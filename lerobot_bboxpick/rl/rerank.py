@@ -65,16 +65,25 @@ def rerank_absolute(critic, batch: dict[str, Tensor], candidates: Tensor) -> Rer
 
 
 @torch.no_grad()
-def sample_and_rerank(
-    policy, critic, batch: dict[str, Tensor], n: int, generator: torch.Generator | None = None
-) -> RerankResult:
-    """Draw ``n`` chunks per observation from ``policy.predict_action_chunk`` and keep the argmax-Q one."""
+def sample_chunks(
+    policy, batch: dict[str, Tensor], n: int, generator: torch.Generator | None = None
+) -> Tensor:
+    """``n`` absolute chunks ``(B, n, H, 10)`` per observation of ``batch``, drawn from
+    ``policy.predict_action_chunk`` in one batch."""
     if n < 1:
         raise ValueError(f"n={n} must be >= 1")
     b = batch[STATE].shape[0]
     repeated = {k: v.repeat_interleave(n, dim=0) for k, v in batch.items() if isinstance(v, Tensor)}
     chunks = policy.predict_action_chunk(repeated, generator=generator)
-    return rerank_absolute(critic, batch, chunks.view(b, n, *chunks.shape[1:]))
+    return chunks.view(b, n, *chunks.shape[1:])
+
+
+@torch.no_grad()
+def sample_and_rerank(
+    policy, critic, batch: dict[str, Tensor], n: int, generator: torch.Generator | None = None
+) -> RerankResult:
+    """Draw ``n`` chunks per observation from ``policy.predict_action_chunk`` and keep the argmax-Q one."""
+    return rerank_absolute(critic, batch, sample_chunks(policy, batch, n, generator))
 
 
 class QRerankSelector:
@@ -110,9 +119,6 @@ class QRerankSelector:
 
     def __call__(self, policy, stacked: dict[str, Tensor], generator: torch.Generator | None) -> Tensor:
         """The chosen absolute chunk ``(B, H, 10)`` for observations ``stacked``."""
-        b = stacked[STATE].shape[0]
-        repeated = {k: v.repeat_interleave(self.n, dim=0) for k, v in stacked.items()}
-        draws = policy.predict_action_chunk(repeated, generator=generator)
-        candidates = self._with_residuals(draws.view(b, self.n, *draws.shape[1:]))
+        candidates = self._with_residuals(sample_chunks(policy, stacked, self.n, generator))
         self.last = rerank_absolute(self.critic, stacked, candidates)
         return self.last.best

@@ -175,15 +175,34 @@ def diagnose(model: IqlCriticModel, features: StateFeatures, train: Transitions,
     return out
 
 
-def _prepare_output(cfg: TrainCriticConfig) -> None:
-    if cfg.output_dir.exists() and any(cfg.output_dir.iterdir()):
-        if not cfg.overwrite:
+def prepare_output_dir(output_dir: Path, overwrite: bool, stale_files: tuple[str, ...] = ()) -> None:
+    """Create ``output_dir``; a non-empty one is refused unless ``overwrite``, and then its checkpoints
+    and ``stale_files`` (logs a new run appends to) are removed."""
+    if output_dir.exists() and any(output_dir.iterdir()):
+        if not overwrite:
             raise FileExistsError(
-                f"output_dir={cfg.output_dir} is not empty; pass --overwrite=true or another folder"
+                f"output_dir={output_dir} is not empty; pass --overwrite=true or another folder"
             )
-        shutil.rmtree(cfg.output_dir / "checkpoints", ignore_errors=True)
-        (cfg.output_dir / "diagnostics.jsonl").unlink(missing_ok=True)
-    cfg.output_dir.mkdir(parents=True, exist_ok=True)
+        shutil.rmtree(output_dir / "checkpoints", ignore_errors=True)
+        for name in stale_files:
+            (output_dir / name).unlink(missing_ok=True)
+    output_dir.mkdir(parents=True, exist_ok=True)
+
+
+def save_critic_checkpoint(
+    model: IqlCriticModel, cfg: object, output_dir: Path, total: int, step: int, extra: dict | None = None
+) -> Path:
+    """LeRobot's checkpoint layout: ``<output_dir>/checkpoints/<step>/pretrained_model`` with the model,
+    ``train_config.json`` (``cfg``) and one JSON file per ``extra`` entry, and the ``last`` link to it;
+    returns the ``pretrained_model`` folder."""
+    ckpt = get_step_checkpoint_dir(output_dir, total, step)
+    pretrained = ckpt / PRETRAINED_MODEL_DIR
+    model.save_pretrained(pretrained)
+    (pretrained / TRAIN_CONFIG_NAME).write_text(json.dumps(draccus.encode(cfg), indent=4))
+    for name, value in (extra or {}).items():
+        (pretrained / name).write_text(json.dumps(value, indent=1))
+    update_last_checkpoint(ckpt)
+    return pretrained
 
 
 def train_critic(cfg: TrainCriticConfig) -> dict:
@@ -195,7 +214,7 @@ def train_critic(cfg: TrainCriticConfig) -> dict:
         )
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    _prepare_output(cfg)
+    prepare_output_dir(cfg.output_dir, cfg.overwrite, ("diagnostics.jsonl",))
     with torch.random.fork_rng():  # seeded here without touching the caller's RNG state
         torch.manual_seed(cfg.seed)
         policy = load_policy(cfg.policy_path)
@@ -274,12 +293,9 @@ def _fit(
             f.write(json.dumps(record) + "\n")
     bar.close()
     model.eval()
-    ckpt = get_step_checkpoint_dir(cfg.output_dir, total, step)
-    pretrained = ckpt / PRETRAINED_MODEL_DIR
-    model.save_pretrained(pretrained)
-    (pretrained / TRAIN_CONFIG_NAME).write_text(json.dumps(draccus.encode(cfg), indent=4))
-    (pretrained / DIAGNOSTICS_NAME).write_text(json.dumps(diagnostics, indent=1))
-    update_last_checkpoint(ckpt)
+    pretrained = save_critic_checkpoint(
+        model, cfg, cfg.output_dir, total, step, {DIAGNOSTICS_NAME: diagnostics}
+    )
     return {
         "checkpoint": str(pretrained),
         "steps": step,

@@ -20,15 +20,12 @@ critic ranks first with the policy's own chunk and with the best candidate, and 
 import json
 import logging
 import math
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import draccus
 import numpy as np
 import torch
-from lerobot.common.train_utils import get_step_checkpoint_dir, update_last_checkpoint
-from lerobot.utils.constants import PRETRAINED_MODEL_DIR
 from torch import Tensor
 from tqdm import tqdm
 
@@ -37,10 +34,10 @@ from lerobot_bboxpick.keys import BBOX, STATE, WRIST_IMAGE
 from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
 from lerobot_bboxpick.rl.counterfactual_dataset import CONFIG_NAME, CounterfactualPoints, load_points
 from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel, load_policy
+from lerobot_bboxpick.rl.train_critic import prepare_output_dir, save_critic_checkpoint
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
 log = logging.getLogger(__name__)
-TRAIN_CONFIG_NAME = "train_config.json"
 REPORT_NAME = "mc_report"
 
 
@@ -373,13 +370,7 @@ def markdown_report(report: dict) -> str:
 
 def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
     """Train, save like ``bboxpick-train-critic`` does, evaluate; returns the report dict."""
-    if cfg.output_dir.exists() and any(cfg.output_dir.iterdir()):
-        if not cfg.overwrite:
-            raise FileExistsError(
-                f"output_dir={cfg.output_dir} is not empty; pass --overwrite=true or another folder"
-            )
-        shutil.rmtree(cfg.output_dir / "checkpoints", ignore_errors=True)
-    cfg.output_dir.mkdir(parents=True, exist_ok=True)
+    prepare_output_dir(cfg.output_dir, cfg.overwrite)
     policy_path = cfg.policy_path
     if policy_path is None:
         meta = json.loads((cfg.data_dir / CONFIG_NAME).read_text())
@@ -417,11 +408,7 @@ def train_mc_critic(cfg: TrainMcCriticConfig) -> dict:
             "path": str(cfg.compare_critic_path),
             **evaluate_critic(other, val, rel[val_rows]),
         }
-    ckpt = get_step_checkpoint_dir(cfg.output_dir, cfg.steps, cfg.steps)
-    pretrained = ckpt / PRETRAINED_MODEL_DIR
-    model.save_pretrained(pretrained)
-    (pretrained / TRAIN_CONFIG_NAME).write_text(json.dumps(draccus.encode(cfg), indent=4))
-    update_last_checkpoint(ckpt)
+    pretrained = save_critic_checkpoint(model, cfg, cfg.output_dir, cfg.steps, cfg.steps)
     report["checkpoint"] = str(pretrained)
     (cfg.output_dir / f"{REPORT_NAME}.json").write_text(json.dumps(report, indent=1))
     (cfg.output_dir / f"{REPORT_NAME}.md").write_text(markdown_report(report))
