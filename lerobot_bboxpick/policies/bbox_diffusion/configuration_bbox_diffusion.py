@@ -74,6 +74,18 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # sampling runs in float32 unless this is set (e.g. on a GPU where bf16 inference pays).
     autocast_inference: bool = False
 
+    # Latency compensation on a real arm (UMI; lerobot_bboxpick.latency). With compensate_latency, a new
+    # chunk's observation counts as captured camera_latency_s before select_action received it; its step
+    # i is due (i + 1) / control_fps after that (our datasets record at frame t the target reached at
+    # t + 1) and must be commanded action_latency_s earlier; the steps whose command time passed while
+    # the frame travelled and the chunk was sampled are dropped, the rest executed one per tick. Off in
+    # simulation, which has no latency (and lerobot-eval does not run in real time). Defaults: GoPro
+    # through an Elgato capture card (0.17 s), a UR5e servoing with lookahead 0.1 s; 20 Hz control.
+    compensate_latency: bool = False
+    camera_latency_s: float = 0.17
+    action_latency_s: float = 0.1
+    control_fps: float = 20.0
+
     # Noise schedule (UMI: DDIM, 50 train steps, squaredcos_cap_v2, epsilon, clip_sample).
     num_train_timesteps: int = 50
     num_inference_steps: int = 16
@@ -132,6 +144,11 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon={self.horizon}]")
         if self.prediction_type not in ("epsilon", "sample"):
             raise ValueError(f"prediction_type={self.prediction_type!r} must be 'epsilon' or 'sample'")
+        for name in ("camera_latency_s", "action_latency_s"):
+            if not 0.0 <= getattr(self, name) < 10.0:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be in [0, 10) seconds")
+        if not 0.0 < self.control_fps <= 1000.0:
+            raise ValueError(f"control_fps={self.control_fps!r} must be in (0, 1000] Hz")
         if not 0.5 <= self.crop_ratio <= 1.0:
             raise ValueError(f"crop_ratio={self.crop_ratio} must be in [0.5, 1]")
 

@@ -10,6 +10,8 @@ Data flow for one prediction (paper figure 5):
 The policy takes and returns absolute poses; the relative form (UMI) exists only inside the model.
 """
 
+import logging
+import time
 import warnings
 from collections import deque
 from collections.abc import Callable
@@ -25,6 +27,7 @@ from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
 from lerobot_bboxpick.geometry import absolute_pose10_torch, relative_pose10_torch
+from lerobot_bboxpick.latency import fresh_steps, observation_time
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
     BboxDiffusionConfig,
     BboxDiffusionPaperConfig,
@@ -35,6 +38,8 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     bbox_to_mask,
     mask_moments,
 )
+
+log = logging.getLogger(__name__)
 
 
 class PoseScaler(nn.Module):
@@ -216,6 +221,8 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         self.ema_model = deepcopy(self.model).requires_grad_(False) if config.use_ema else None
         self._ema_updates = 0
         self.chunk_selector: ChunkSelector | None = None
+        # Seconds on one monotonic clock; latency compensation reads it (tests set a fake one).
+        self.clock: Callable[[], float] = time.monotonic
         self.reset()
 
     def get_optim_params(self) -> list[dict]:
@@ -283,6 +290,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
     def select_action(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
         """Next absolute action (B, 10); a new chunk is predicted every ``n_action_steps`` calls (by
         ``chunk_selector`` when one is set, else ``predict_action_chunk``)."""
+        received = self.clock()
         batch = {k: v for k, v in batch.items() if k in self._queues}
         self._queues = populate_queues(self._queues, batch)
         if not self._actions:
@@ -291,8 +299,20 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
                 chunk = self.predict_action_chunk(stacked, generator=generator)
             else:  # e.g. critic reranking of several sampled chunks (set by the caller, never saved)
                 chunk = self.chunk_selector(self, stacked, generator)
+            steps = self._fresh_steps(chunk.shape[1], received) if self.config.compensate_latency else None
+            if steps is not None:
+                chunk = chunk[:, steps]
             self._actions.extend(chunk[:, : self.config.n_action_steps].transpose(0, 1))
         return self._actions.popleft()
+
+    def _fresh_steps(self, horizon: int, received: float) -> Tensor:
+        """Indices of the chunk's steps still ahead of the arm (``compensate_latency``)."""
+        c = self.config
+        dt = 1.0 / c.control_fps
+        captured = observation_time(received, c.camera_latency_s)
+        steps = fresh_steps(horizon, captured + dt, dt, self.clock(), c.action_latency_s)
+        log.debug("latency compensation: %d of %d chunk steps already due, dropped", steps[0], horizon)
+        return torch.as_tensor(steps, dtype=torch.long)
 
 
 class BboxDiffusionPaperPolicy(BboxDiffusionPolicy):

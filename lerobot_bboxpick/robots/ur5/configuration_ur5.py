@@ -74,10 +74,8 @@ class UR5Config(RobotConfig):
     tcp_offset_m: float = 0.235
     # Gripper of the real arm: "robotiq_2f85" (URCap socket on the controller).
     gripper: str = "robotiq_2f85"
-    # Latencies (s) of the wrist image (GoPro -> capture card) and of the arm executing a command.
-    # GoPro -> Elgato HD60 X: 0.17 s, the value UMI's real-robot evaluation uses for this chain.
-    camera_latency_s: float = 0.17
-    action_latency_s: float = 0.1
+    # Camera and arm latencies are compensated where the chunks are, in the policy:
+    # --policy.compensate_latency=true (--policy.camera_latency_s, --policy.action_latency_s).
     # Wrist camera (capture card) for the rtde backend, e.g.
     # --robot.cameras='{wrist: {type: opencv, index_or_path: 0, width: 1920, height: 1080, fps: 30}}'.
     # Frames are resized to height 224 and centre-cropped as UMI does. The mujoco backend renders its own.

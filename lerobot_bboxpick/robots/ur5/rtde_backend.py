@@ -153,7 +153,7 @@ class RtdeSettings:
     gain: float = 300.0  # servoL proportional gain, ur_rtde allows 100..2000
     # A target is due command_period_s (the 20 Hz command period) + action_latency_s after it arrives.
     # action_latency_s is a buffer against late command() calls; the arm's own lag is compensated
-    # upstream (timing.schedule_chunk), not here.
+    # upstream (the policy drops stale chunk steps: lerobot_bboxpick.latency), not here.
     command_period_s: float = 0.05
     action_latency_s: float = 0.0
     action_timeout_s: float = 0.5  # no command for this long: servoStop and hold
@@ -296,7 +296,7 @@ class RtdeArm(ArmBackend):
 
     @property
     def schedule_delay_s(self) -> float:
-        """How long after ``command`` a target is due (``timing.command_send_time`` uses it)."""
+        """How long after ``command`` a target is due (``latency.command_send_time`` uses it)."""
         return self.settings.schedule_delay_s
 
     @property

@@ -1,5 +1,8 @@
 """UMI-style latency compensation on a real arm, as pure functions (times in seconds, one clock).
 
+``bbox_diffusion`` applies it on the action path (``--policy.compensate_latency=true``): each new chunk
+keeps only its :func:`fresh_steps`; the robot then executes them one per control tick.
+
 * The wrist image reaches us ``camera_latency_s`` after it was captured, so an observation's time is
   its receive time minus that latency (:func:`observation_time`).
 * A policy's action chunk predicted from that observation holds step ``i`` for the time
@@ -38,6 +41,36 @@ def observation_time(receive_time: float, camera_latency_s: float = GOPRO_ELGATO
     return _finite("receive_time", receive_time) - _finite("camera_latency_s", camera_latency_s, 0.0)
 
 
+def fresh_steps(
+    num_steps: int,
+    start_time: float,
+    dt: float,
+    now: float,
+    action_latency_s: float = UR_ACTION_LATENCY_S,
+    hold_last_if_late: bool = True,
+) -> np.ndarray:
+    """Indices of the steps of a ``num_steps`` chunk that can still be commanded at ``now``.
+
+    Step ``i`` is due at ``start_time + i * dt`` and must be commanded ``action_latency_s`` earlier;
+    steps whose command time is ``<= now`` are dropped. If every step is late (inference took longer than
+    the chunk), ``hold_last_if_late`` keeps UMI's fallback, the last step alone; otherwise none.
+    """
+    if int(num_steps) < 1:
+        raise ValueError(f"num_steps={num_steps!r} must be >= 1")
+    times = _command_times(int(num_steps), start_time, dt, action_latency_s)
+    keep = np.flatnonzero(times > _finite("now", now))
+    if len(keep) == 0 and hold_last_if_late:
+        keep = np.array([num_steps - 1])
+    return keep
+
+
+def _command_times(num_steps: int, start_time: float, dt: float, action_latency_s: float) -> np.ndarray:
+    start_time = _finite("obs_time", start_time)
+    dt = _finite("dt", dt, 0.0, strict=True)
+    action_latency_s = _finite("action_latency_s", action_latency_s, 0.0)
+    return start_time + np.arange(num_steps) * dt - action_latency_s
+
+
 def schedule_chunk(
     actions: np.ndarray,
     obs_time: float,
@@ -50,21 +83,17 @@ def schedule_chunk(
 
     Step ``i`` gets ``target_time = obs_time + i * dt - action_latency_s`` (when the arm must be
     commanded to be at it so that it actually is at ``obs_time + i * dt``); pairs with
-    ``target_time <= now`` are dropped. If every step is late (inference took longer than the chunk),
+    ``target_time <= now`` are dropped (:func:`fresh_steps`). If every step is late,
     ``hold_last_if_late`` keeps UMI's fallback: the last action, at the first step time after ``now`` on
     the chunk's ``dt`` grid; otherwise the list is empty.
     """
     a = np.asarray(actions, dtype=np.float64)
     if a.ndim != 2 or a.shape[0] < 1 or a.shape[1] != 10:
         raise ValueError(f"actions must have shape (N, 10) with N >= 1 (pose10 per step), got {a.shape}")
-    obs_time = _finite("obs_time", obs_time)
-    dt = _finite("dt", dt, 0.0, strict=True)
-    now = _finite("now", now)
-    action_latency_s = _finite("action_latency_s", action_latency_s, 0.0)
-    times = obs_time + np.arange(len(a)) * dt - action_latency_s
-    keep = times > now
-    if keep.any():
-        return [(a[i].copy(), float(times[i])) for i in np.flatnonzero(keep)]
+    times = _command_times(len(a), obs_time, dt, action_latency_s)
+    keep = fresh_steps(len(a), obs_time, dt, now, action_latency_s, hold_last_if_late=False)
+    if len(keep):
+        return [(a[i].copy(), float(times[i])) for i in keep]
     if not hold_last_if_late:
         return []
     # Smallest grid index whose time is strictly after now (floor + 1 also covers now on the grid).
