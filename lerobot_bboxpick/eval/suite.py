@@ -83,6 +83,11 @@ class SuiteConfig:
     # Bounded residuals added to every draw before reranking, <axis>:<amount> tried with + and - (e.g.
     # "yaw:0.35,x:0.03"; rl.chunk_perturbations); empty: the policy's draws only.
     rerank_perturbations: str = ""
+    # Q-guided diffusion (paper section 4.2): with guidance_scale > 0 every draw is steered by the
+    # critic's action gradient, at most guidance_max_step (scaled action units) per denoising step
+    # (rl.q_guidance). With rerank_samples=1 the guided draw is executed as is.
+    guidance_scale: float = 0.0
+    guidance_max_step: float = 0.02
     # The bbox the policy sees: oracle, noisy or tracked (see the module docstring).
     bbox_source: str = "oracle"
     # Target IoU of the noisy bbox with the oracle one.
@@ -118,6 +123,13 @@ class SuiteConfig:
             from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
 
             parse_perturbations(self.rerank_perturbations, "rerank_perturbations")
+        if self.guidance_scale < 0 or not 0 < self.guidance_max_step <= 1:
+            raise ValueError(
+                f"guidance_scale={self.guidance_scale!r} must be >= 0 and guidance_max_step="
+                f"{self.guidance_max_step!r} in (0, 1]"
+            )
+        if self.guidance_scale > 0 and self.critic_path is None:
+            raise ValueError("guidance_scale > 0 needs critic_path (the critic whose gradient guides)")
         check_bbox_source(self.bbox_source)
         check_ray(self.ray_address)
         if not 0.0 < self.noisy_iou <= 1.0:
@@ -178,12 +190,26 @@ def run_key(cfg: SuiteConfig, path: str) -> dict:
         key["n_action_steps"] = cfg.n_action_steps if cfg.n_action_steps is not None else own
         if cfg.num_inference_steps is not None:  # absent otherwise: older tables' run keys stay valid
             key["num_inference_steps"] = cfg.num_inference_steps
-        if cfg.critic_path is not None:
-            key["critic"] = weights_digest(str(cfg.critic_path))
-            key["rerank_samples"] = cfg.rerank_samples
-            if cfg.rerank_perturbations:
-                key["rerank_perturbations"] = cfg.rerank_perturbations
+        critic = critic_options(cfg)
+        if critic is not None:
+            key["critic"] = weights_digest(critic.pop("critic_path"))
+            key.update({k: v for k, v in critic.items() if v})  # unset options: older run keys stay valid
     return key
+
+
+def critic_options(cfg: SuiteConfig) -> dict | None:
+    """How the critic is used (``load_runner``'s ``critic``), or None without ``critic_path``."""
+    if cfg.critic_path is None:
+        return None
+    options = {
+        "critic_path": str(cfg.critic_path),
+        "rerank_samples": cfg.rerank_samples,
+        "rerank_perturbations": cfg.rerank_perturbations,
+        "guidance_scale": cfg.guidance_scale,
+    }
+    if cfg.guidance_scale > 0:
+        options["guidance_max_step"] = cfg.guidance_max_step
+    return options
 
 
 def policy_label(path: str) -> str:
@@ -228,40 +254,49 @@ def load_runner(
     n_action_steps: int | None,
     env: Any,
     num_inference_steps: int | None = None,
-    critic_path: str | None = None,
-    rerank_samples: int = 1,
-    rerank_perturbations: str = "",
+    critic: dict | None = None,
 ) -> Any:
     """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept;
-    with ``critic_path`` its chunks are Q-reranked among ``rerank_samples`` draws (and their
-    ``rerank_perturbations`` residuals)."""
+    with ``critic`` (``critic_options``) its chunks are Q-reranked among ``rerank_samples`` draws (and
+    their ``rerank_perturbations`` residuals), each Q-guided when ``guidance_scale`` > 0."""
     from lerobot_bboxpick.eval.rollout import ExpertRunner, PolicyRunner
 
     if path == EXPERT:
         return ExpertRunner(env)
-    key = (path, n_action_steps, num_inference_steps, critic_path, rerank_samples, rerank_perturbations)
+    key = (path, n_action_steps, num_inference_steps, json.dumps(critic, sort_keys=True))
     if key not in _POLICIES:
         _POLICIES.clear()  # one checkpoint in memory per worker at a time
         with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights ..." per load
             runner = PolicyRunner.from_pretrained(
                 path, n_action_steps=n_action_steps, num_inference_steps=num_inference_steps
             )
-        if critic_path is not None:
-            from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
-            from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
-            from lerobot_bboxpick.rl.rerank import QRerankSelector
-
+        if critic is not None:
             if not hasattr(runner.policy, "chunk_selector"):
                 raise ValueError(
                     f"critic_path: policy {path} ({runner.policy.name}) cannot rerank its chunks"
                 )
-            runner.policy.chunk_selector = QRerankSelector(
-                IqlCriticModel.from_pretrained(critic_path),
-                rerank_samples,
-                parse_perturbations(rerank_perturbations, "rerank_perturbations"),
-            )
+            runner.policy.chunk_selector = critic_selector(**critic)
         _POLICIES[key] = runner
     return _POLICIES[key]
+
+
+def critic_selector(
+    critic_path: str,
+    rerank_samples: int = 1,
+    rerank_perturbations: str = "",
+    guidance_scale: float = 0.0,
+    guidance_max_step: float = 0.02,
+) -> Any:
+    """The chunk selector that uses the critic at ``critic_path`` as ``critic_options`` says."""
+    from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
+    from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
+    from lerobot_bboxpick.rl.q_guidance import QGuidance
+    from lerobot_bboxpick.rl.rerank import QRerankSelector
+
+    model = IqlCriticModel.from_pretrained(critic_path)
+    guidance = QGuidance(model, guidance_scale, guidance_max_step) if guidance_scale > 0 else None
+    perturbations = parse_perturbations(rerank_perturbations, "rerank_perturbations")
+    return QRerankSelector(model, rerank_samples, perturbations, guidance)
 
 
 def _env(setting: str, max_steps: int) -> Any:
@@ -287,9 +322,7 @@ def run_episode(task: dict) -> dict:
         task.get("n_action_steps"),
         env,
         task.get("num_inference_steps"),
-        task.get("critic_path"),
-        task.get("rerank_samples", 1),
-        task.get("rerank_perturbations", ""),
+        task.get("critic"),
     )
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
@@ -339,9 +372,7 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, di
                         "max_steps": cfg.max_steps,
                         "n_action_steps": cfg.n_action_steps,
                         "num_inference_steps": cfg.num_inference_steps,
-                        "critic_path": str(cfg.critic_path) if cfg.critic_path else None,
-                        "rerank_samples": cfg.rerank_samples,
-                        "rerank_perturbations": cfg.rerank_perturbations,
+                        "critic": critic_options(cfg),
                         "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
                         "frame": str(frame_path(cfg.out_dir, label, setting, seed)),

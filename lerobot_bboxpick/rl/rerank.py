@@ -18,6 +18,7 @@ from torch import Tensor
 
 from lerobot_bboxpick.geometry import relative_pose10_torch
 from lerobot_bboxpick.keys import STATE
+from lerobot_bboxpick.rl.q_guidance import QGuidance
 
 
 @dataclass
@@ -66,15 +67,20 @@ def rerank_absolute(critic, batch: dict[str, Tensor], candidates: Tensor) -> Rer
 
 @torch.no_grad()
 def sample_chunks(
-    policy, batch: dict[str, Tensor], n: int, generator: torch.Generator | None = None
+    policy,
+    batch: dict[str, Tensor],
+    n: int,
+    generator: torch.Generator | None = None,
+    guidance: QGuidance | None = None,
 ) -> Tensor:
     """``n`` absolute chunks ``(B, n, H, 10)`` per observation of ``batch``, drawn from
-    ``policy.predict_action_chunk`` in one batch."""
+    ``policy.predict_action_chunk`` in one batch (each steered by ``guidance`` when given)."""
     if n < 1:
         raise ValueError(f"n={n} must be >= 1")
     b = batch[STATE].shape[0]
     repeated = {k: v.repeat_interleave(n, dim=0) for k, v in batch.items() if isinstance(v, Tensor)}
-    chunks = policy.predict_action_chunk(repeated, generator=generator)
+    guide = guidance.guide(policy, repeated) if guidance is not None else None
+    chunks = policy.predict_action_chunk(repeated, generator=generator, guide=guide)
     return chunks.view(b, n, *chunks.shape[1:])
 
 
@@ -88,8 +94,9 @@ def sample_and_rerank(
 
 class QRerankSelector:
     """A ``bbox_diffusion`` chunk selector (``policy.chunk_selector``): sample ``n`` chunks from the
-    policy, optionally add bounded per-axis residuals of each (``perturbations``, ramped in over the
-    chunk: ``rl.chunk_perturbations``), and execute the argmax-Q candidate.
+    policy (Q-guided when ``guidance`` is given: ``rl.q_guidance``), optionally add bounded per-axis
+    residuals of each (``perturbations``, ramped in over the chunk: ``rl.chunk_perturbations``), and
+    execute the argmax-Q candidate (with ``n=1`` and no residuals: the guided draw itself).
 
     The trust region is the policy's own distribution, widened by at most the residuals' size: every
     executed chunk is one the imitation policy could have drawn itself, or such a chunk moved by a few
@@ -97,10 +104,13 @@ class QRerankSelector:
     on (``bboxpick-counterfactual`` tries exactly these residuals), never ones far from it.
     """
 
-    def __init__(self, critic, n: int, perturbations: Sequence = ()) -> None:
+    def __init__(
+        self, critic, n: int, perturbations: Sequence = (), guidance: QGuidance | None = None
+    ) -> None:
         if n < 1:
             raise ValueError(f"rerank samples n={n} must be >= 1")
         self.critic, self.n, self.perturbations = critic, n, tuple(perturbations)
+        self.guidance = guidance
         self.last: RerankResult | None = None  # the latest choice, for diagnostics
 
     @property
@@ -119,6 +129,7 @@ class QRerankSelector:
 
     def __call__(self, policy, stacked: dict[str, Tensor], generator: torch.Generator | None) -> Tensor:
         """The chosen absolute chunk ``(B, H, 10)`` for observations ``stacked``."""
-        candidates = self._with_residuals(sample_chunks(policy, stacked, self.n, generator))
+        draws = sample_chunks(policy, stacked, self.n, generator, self.guidance)
+        candidates = self._with_residuals(draws)
         self.last = rerank_absolute(self.critic, stacked, candidates)
         return self.last.best

@@ -42,6 +42,10 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
 log = logging.getLogger(__name__)
 
 
+# ``predicted clean chunk (B, horizon, 10), scaled -> correction of the same shape``: steers sampling.
+Guide = Callable[[Tensor], Tensor]
+
+
 class PoseScaler(nn.Module):
     """Fixed affine scaling of relative pose10 vectors into roughly [-1, 1] (and back).
 
@@ -182,8 +186,19 @@ class BboxDiffusionModel(nn.Module):
         return self._traced_unets[key]
 
     @torch.no_grad()
-    def sample(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> Tensor:
-        """Relative action chunk (B, horizon, 10), unscaled, relative to the latest observed pose."""
+    def sample(
+        self, batch: dict[str, Tensor], generator: torch.Generator | None = None, guide: Guide | None = None
+    ) -> Tensor:
+        """Relative action chunk (B, horizon, 10), unscaled, relative to the latest observed pose.
+
+        ``guide`` (e.g. ``rl.q_guidance``) maps each denoising step's predicted clean chunk (scaled) to a
+        correction added to it before the scheduler step; it needs ``prediction_type="sample"``.
+        """
+        if guide is not None and self.config.prediction_type != "sample":
+            raise ValueError(
+                f"guided sampling needs prediction_type='sample' (this policy predicts "
+                f"{self.config.prediction_type!r})"
+            )
         cond = self.global_condition(*self._inputs(batch))  # once per chunk, not per denoising step
         sample = torch.randn(
             (cond.shape[0], self.config.horizon, 10),
@@ -197,6 +212,8 @@ class BboxDiffusionModel(nn.Module):
         for t in self.noise_scheduler.timesteps:
             timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
             output = unet(sample, timestep, cond)
+            if guide is not None:
+                output = output + guide(output)
             sample = self.noise_scheduler.step(output, t, sample, generator=generator).prev_sample
         return self.action_scaler.inverse(sample)
 
@@ -267,7 +284,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def predict_action_chunk(
-        self, batch: dict[str, Tensor], generator: torch.Generator | None = None
+        self, batch: dict[str, Tensor], generator: torch.Generator | None = None, guide: Guide | None = None
     ) -> Tensor:
         """Absolute action chunk (B, horizon, 10) for a batch with (B, n_obs, ...) observations (a batch
         of single observations without a time axis is taken as one observed step).
@@ -281,7 +298,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         with torch.autocast(
             device_type, enabled=self.config.autocast_inference and torch.is_autocast_enabled(device_type)
         ):
-            relative = model.sample(batch, generator=generator)
+            relative = model.sample(batch, generator=generator, guide=guide)
         current = batch[OBS_STATE] if batch[OBS_STATE].ndim == 2 else batch[OBS_STATE][:, -1]
         with torch.autocast(device_type, enabled=False):  # pose algebra in float32, whatever encloses us
             return absolute_pose10_torch(relative.float(), current.float())
