@@ -34,6 +34,7 @@ from lerobot_bboxpick.keys import BBOX, STATE, WRIST_IMAGE
 from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
 from lerobot_bboxpick.rl.counterfactual_dataset import CONFIG_NAME, CounterfactualPoints, load_points
 from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel, load_policy
+from lerobot_bboxpick.rl.sign_flip import sign_agreement, sign_flip_table
 from lerobot_bboxpick.rl.train_critic import prepare_output_dir, save_critic_checkpoint
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
@@ -249,13 +250,15 @@ def _fit(
 def evaluate_critic(
     model: IqlCriticModel, points: CounterfactualPoints, rel: np.ndarray, feats: Tensor | None = None
 ) -> dict:
-    """Reranking and test B of ``model`` on ``points`` (features computed unless given)."""
+    """Reranking, sign agreement and test B of ``model`` on ``points`` (features computed unless given)."""
     from lerobot_bboxpick.rl.verify import action_sensitivity, sweep_offsets
 
     if feats is None:
         feats = point_features(model, points, 32, progress=False)
+    q = q_table(model, feats, rel)
     return {
-        "rerank": rerank_evaluation(q_table(model, feats, rel), points),
+        "rerank": rerank_evaluation(q, points),
+        "sign_flip": sign_agreement(q, points.ret, points.kinds, points.base_pose),
         "test_b": action_sensitivity(model, feats, sweep_states(points, rel), sweep_offsets(0.08, 9)),
     }
 
@@ -316,6 +319,7 @@ def _row(*cells: object) -> str:
 
 def markdown_report(report: dict) -> str:
     """The report as markdown."""
+
     lines = [
         "# Monte-Carlo critic on counterfactual branches\n",
         f"Data: `{report['data_dir']}`, {report['points']} branch points ({report['train_points']} train / "
@@ -365,6 +369,17 @@ def markdown_report(report: dict) -> str:
         f"strictly the Q-argmax of its sweep on {match} of {b['n_pregrasp']} pre-grasp points."
     )
     lines += ["\n## Side by side\n", comparison_table(report)]
+    columns = [("MC", report["val"]["sign_flip"])]
+    if "compare" in report:
+        columns.append(("compared", report["compare"]["sign_flip"]))
+    lines += [
+        "\n## Sign flips (held-out points)\n",
+        "Where the +d and -d branches' true returns differ: how often each critic prefers the better "
+        "sign (50% = chance), how often the TCP's own axis points against the world's (a residual grid "
+        "built in the TCP frame would move the other way there), and the critic's agreement if its "
+        "choice were read in the TCP frame (`lerobot_bboxpick.rl.sign_flip`).\n",
+        sign_flip_table(columns),
+    ]
     return "\n".join(lines) + "\n"
 
 
