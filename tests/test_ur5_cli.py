@@ -88,6 +88,9 @@ def test_the_clis_list_the_robot_and_the_teleoperator():
     for cli in ("lerobot-record", "lerobot-rollout"):
         text = _run([BIN / cli, "--help"], timeout=120)
         assert "ur5" in text and "bboxpick_expert" in text, cli
+    for cli in ("bboxpick-record-ee", "bboxpick-rollout-ee"):  # a person's end-effector teleoperators
+        text = _run([BIN / cli, "--help"], timeout=120)
+        assert "ur5" in text and "keyboard_ee" in text and "gamepad" in text, cli
 
 
 def test_lerobot_record_with_the_expert_records_two_picks(recorded):
@@ -156,6 +159,28 @@ def test_lerobot_rollout_base_feeds_the_policy_the_robot_bbox_and_pose(checkpoin
         np.testing.assert_allclose(events[i]["policy_state"], robot["robot_pose"], atol=1e-5)
     first = events[calls[0]]["policy_box"]  # at the start the target is in view: a real box, not zeros
     assert first[2] > first[0] > 0 and first[3] > first[1] > 0
+
+
+def test_bboxpick_rollout_ee_runs_lerobots_rollout_with_the_delta_step(checkpoint):
+    """The entry point a person uses for DAgger with a keyboard or gamepad: LeRobot's rollout, our teleop
+    step. (The takeover itself needs a keyboard on an X11 session or a gamepad: not here.)"""
+    out = _run(
+        [
+            BIN / "bboxpick-rollout-ee",
+            "--robot.type=ur5",
+            "--robot.seed=10000",
+            "--robot.safety.workspace_low=[-2,-2,-1]",
+            "--robot.safety.workspace_high=[2,2,2]",
+            f"--policy.path={checkpoint}",
+            "--strategy.type=base",
+            "--duration=3",
+            "--fps=20",
+            "--task=pick up the block in the box",
+            "--play_sounds=false",
+            "--device=cpu",
+        ]
+    )
+    assert "rollout strategy base, teleop actions through ['EEDeltaToPose10Step']" in out
 
 
 def _wait_for(log: Path, text: str, process: subprocess.Popen, timeout: float) -> None:

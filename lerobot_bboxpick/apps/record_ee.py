@@ -12,6 +12,9 @@ from __future__ import annotations
 from lerobot.processor import RobotProcessorPipeline
 from lerobot.processor.converters import robot_action_observation_to_transition, transition_to_robot_action
 
+# lerobot-record registers the keyboard teleoperators; the gamepad's config must be imported too.
+from lerobot.teleoperators.gamepad import configuration_gamepad  # noqa: F401
+
 from lerobot_bboxpick.robots.ur5.processor_ee_delta import EEDeltaToPose10Step
 
 
