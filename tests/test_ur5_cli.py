@@ -128,6 +128,25 @@ def test_lerobot_train_reads_the_packed_state_as_pose_and_bbox(checkpoint):
     assert "bboxpick_unpack_bbox_from_state" in steps
 
 
+def _base_rollout(checkpoint: Path, duration_s: int) -> list[str]:
+    """lerobot-rollout options: the base strategy on scene 10000 for ``duration_s`` seconds."""
+    return [
+        "--robot.type=ur5",
+        "--robot.seed=10000",
+        # A one-step policy's actions are noise: a wide box keeps the robot from refusing them (the
+        # simulator's IK still clamps to its reach).
+        "--robot.safety.workspace_low=[-2,-2,-1]",
+        "--robot.safety.workspace_high=[2,2,2]",
+        f"--policy.path={checkpoint}",
+        "--strategy.type=base",
+        f"--duration={duration_s}",
+        "--fps=20",
+        "--task=pick up the block in the box",
+        "--play_sounds=false",
+        "--device=cpu",
+    ]
+
+
 def test_lerobot_rollout_base_feeds_the_policy_the_robot_bbox_and_pose(checkpoint, tmp_path):
     spy = tmp_path / "spy.jsonl"
     _run(
@@ -135,19 +154,7 @@ def test_lerobot_rollout_base_feeds_the_policy_the_robot_bbox_and_pose(checkpoin
             sys.executable,
             TESTS / "rollout_spy.py",
             spy,
-            "--robot.type=ur5",
-            "--robot.seed=10000",
-            # A one-step policy's actions are noise: a wide box keeps the robot from refusing them (the
-            # simulator's IK still clamps to its reach).
-            "--robot.safety.workspace_low=[-2,-2,-1]",
-            "--robot.safety.workspace_high=[2,2,2]",
-            f"--policy.path={checkpoint}",
-            "--strategy.type=base",
-            "--duration=10",
-            "--fps=20",
-            "--task=pick up the block in the box",
-            "--play_sounds=false",
-            "--device=cpu",
+            *_base_rollout(checkpoint, duration_s=10),
         ]
     )
     events = [json.loads(line) for line in spy.read_text().splitlines()]
@@ -167,17 +174,7 @@ def test_bboxpick_rollout_ee_runs_lerobots_rollout_with_the_delta_step(checkpoin
     out = _run(
         [
             BIN / "bboxpick-rollout-ee",
-            "--robot.type=ur5",
-            "--robot.seed=10000",
-            "--robot.safety.workspace_low=[-2,-2,-1]",
-            "--robot.safety.workspace_high=[2,2,2]",
-            f"--policy.path={checkpoint}",
-            "--strategy.type=base",
-            "--duration=3",
-            "--fps=20",
-            "--task=pick up the block in the box",
-            "--play_sounds=false",
-            "--device=cpu",
+            *_base_rollout(checkpoint, duration_s=3),
         ]
     )
     assert "rollout strategy base, teleop actions through ['EEDeltaToPose10Step']" in out
