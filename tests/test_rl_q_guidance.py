@@ -52,8 +52,8 @@ def test_guidance_moves_the_chunk_toward_higher_q_within_the_bound(policy):
     corrections = []
     guide_for = guidance.guide
 
-    def recording_guide(p, b):
-        g = guide_for(p, b)
+    def recording_guide(p, b, repeats=1):
+        g = guide_for(p, b, repeats)
 
         def wrapped(x):
             c = g(x)

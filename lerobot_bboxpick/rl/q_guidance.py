@@ -37,10 +37,11 @@ class QGuidance:
         if not 0 < self.max_step <= 1:
             raise ValueError(f"guidance_max_step={self.max_step!r} must be in (0, 1] (scaled action units)")
 
-    def guide(self, policy, batch: dict[str, Tensor]) -> Guide:
-        """The guide for sampling ``policy`` on observations ``batch`` ``(B, n_obs, ...)``."""
+    def guide(self, policy, batch: dict[str, Tensor], repeats: int = 1) -> Guide:
+        """The guide for sampling ``policy`` ``repeats`` times per observation of ``batch``
+        ``(B, n_obs, ...)`` (samples ordered as ``repeat_interleave``); each observation is encoded once."""
         with torch.no_grad():
-            state = self.critic.encode(batch)
+            state = self.critic.encode(batch).repeat_interleave(repeats, dim=0)
         scaler = policy.model.action_scaler  # fixed scales, the same in the EMA copy
         self.q_trace = []
 

@@ -79,7 +79,7 @@ def sample_chunks(
         raise ValueError(f"n={n} must be >= 1")
     b = batch[STATE].shape[0]
     repeated = {k: v.repeat_interleave(n, dim=0) for k, v in batch.items() if isinstance(v, Tensor)}
-    guide = guidance.guide(policy, repeated) if guidance is not None else None
+    guide = guidance.guide(policy, batch, repeats=n) if guidance is not None else None
     chunks = policy.predict_action_chunk(repeated, generator=generator, guide=guide)
     return chunks.view(b, n, *chunks.shape[1:])
 

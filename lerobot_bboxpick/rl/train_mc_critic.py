@@ -319,7 +319,6 @@ def _row(*cells: object) -> str:
 
 def markdown_report(report: dict) -> str:
     """The report as markdown."""
-
     lines = [
         "# Monte-Carlo critic on counterfactual branches\n",
         f"Data: `{report['data_dir']}`, {report['points']} branch points ({report['train_points']} train / "

@@ -316,9 +316,8 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
                 chunk = self.predict_action_chunk(stacked, generator=generator)
             else:  # e.g. critic reranking of several sampled chunks (set by the caller, never saved)
                 chunk = self.chunk_selector(self, stacked, generator)
-            steps = self._fresh_steps(chunk.shape[1], received) if self.config.compensate_latency else None
-            if steps is not None:
-                chunk = chunk[:, steps]
+            if self.config.compensate_latency:
+                chunk = chunk[:, self._fresh_steps(chunk.shape[1], received)]
             self._actions.extend(chunk[:, : self.config.n_action_steps].transpose(0, 1))
         return self._actions.popleft()
 
