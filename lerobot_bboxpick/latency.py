@@ -57,15 +57,18 @@ def fresh_steps(
     """
     if int(num_steps) < 1:
         raise ValueError(f"num_steps={num_steps!r} must be >= 1")
-    times = _command_times(int(num_steps), start_time, dt, action_latency_s)
-    keep = np.flatnonzero(times > _finite("now", now))
+    times = _command_times(int(num_steps), _finite("start_time", start_time), dt, action_latency_s)
+    keep = _later(times, now)
     if len(keep) == 0 and hold_last_if_late:
         keep = np.array([num_steps - 1])
     return keep
 
 
+def _later(times: np.ndarray, now: float) -> np.ndarray:
+    return np.flatnonzero(times > _finite("now", now))
+
+
 def _command_times(num_steps: int, start_time: float, dt: float, action_latency_s: float) -> np.ndarray:
-    start_time = _finite("obs_time", start_time)
     dt = _finite("dt", dt, 0.0, strict=True)
     action_latency_s = _finite("action_latency_s", action_latency_s, 0.0)
     return start_time + np.arange(num_steps) * dt - action_latency_s
@@ -90,8 +93,8 @@ def schedule_chunk(
     a = np.asarray(actions, dtype=np.float64)
     if a.ndim != 2 or a.shape[0] < 1 or a.shape[1] != 10:
         raise ValueError(f"actions must have shape (N, 10) with N >= 1 (pose10 per step), got {a.shape}")
-    times = _command_times(len(a), obs_time, dt, action_latency_s)
-    keep = fresh_steps(len(a), obs_time, dt, now, action_latency_s, hold_last_if_late=False)
+    times = _command_times(len(a), _finite("obs_time", obs_time), dt, action_latency_s)
+    keep = _later(times, now)
     if len(keep):
         return [(a[i].copy(), float(times[i])) for i in keep]
     if not hold_last_if_late:

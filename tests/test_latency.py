@@ -9,6 +9,7 @@ from lerobot_bboxpick.latency import (
     GOPRO_ELGATO_CAMERA_LATENCY_S,
     UR_ACTION_LATENCY_S,
     command_send_time,
+    fresh_steps,
     observation_time,
     schedule_chunk,
 )
@@ -83,6 +84,12 @@ def test_bad_arguments_name_the_field(kwargs, match):
     args = {"actions": chunk(), "obs_time": 0.0, "dt": 0.05, "now": 0.0, "action_latency_s": 0.1} | kwargs
     with pytest.raises(ValueError, match=match):
         schedule_chunk(**args)
+
+
+def test_fresh_steps_names_its_own_bad_start_time():
+    with pytest.raises(ValueError, match="start_time"):
+        fresh_steps(16, float("nan"), 0.05, 0.0)
+    assert fresh_steps(4, 0.0, 0.25, 0.5, 0.0).tolist() == [3]
 
 
 # ---------------------------------------------------------------- on the action path (bbox_diffusion)

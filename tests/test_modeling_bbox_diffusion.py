@@ -114,3 +114,38 @@ def test_one_observed_step_trains_on_lerobot_dataset_shapes():
     expected = policy.forward(full)[0]
     torch.manual_seed(5)
     assert torch.allclose(policy.forward(squeezed)[0], expected)
+
+
+def test_one_observed_step_reads_the_frames_own_row_with_the_windowed_loss(tmp_path):
+    """With n_obs_steps=1 lerobot-train asks LeRobotDataset for no observation window (the loader's
+    per-key window query is its main cost): the items hold the frame's own state, bbox and image, and
+    the training loss equals the one of an explicit one-step window."""
+    from helpers_data import make_expert_dataset
+    from lerobot.datasets.factory import resolve_delta_timestamps
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from torch.utils.data import default_collate
+
+    make_expert_dataset(tmp_path / "ds", [0])
+    policy = _policy(n_obs_steps=1, image_size=64).train()
+    assert policy.config.observation_delta_indices is None
+    window = resolve_delta_timestamps(policy.config, LeRobotDataset("test/expert", root=tmp_path / "ds").meta)
+    assert set(window) == {"action"}
+    rowwise = LeRobotDataset("test/expert", root=tmp_path / "ds", delta_timestamps=window)
+    explicit = LeRobotDataset(
+        "test/expert",
+        root=tmp_path / "ds",
+        delta_timestamps={**window, **{k: [0.0] for k in ("observation.state", "observation.bbox")}},
+    )
+    frames = [5, 60, 120]
+    a = default_collate([rowwise[i] for i in frames])
+    b = default_collate([explicit[i] for i in frames])
+    assert a["observation.state"].shape == (3, 10) and b["observation.state"].shape == (3, 1, 10)
+    assert torch.equal(a["observation.state"], b["observation.state"][:, 0])
+    assert torch.equal(a["observation.bbox"], b["observation.bbox"][:, 0])
+    assert torch.equal(a["action"], b["action"])
+    # The target moves over the episode: the rows differ, so equal tensors are not an accident.
+    assert (a["observation.state"][0] - a["observation.state"][2]).abs().max() > 0.01
+    torch.manual_seed(5)
+    loss_a = policy.forward(a)[0]
+    torch.manual_seed(5)
+    assert torch.allclose(policy.forward(b)[0], loss_a)

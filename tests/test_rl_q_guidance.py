@@ -19,8 +19,10 @@ class TargetCritic:
 
     def __init__(self, target: torch.Tensor) -> None:
         self.target = target
+        self.encodes = 0  # observations encoded: guidance and reranking share one encoding
 
     def encode(self, batch):
+        self.encodes += 1
         return torch.zeros(batch["observation.state"].shape[0], 1)
 
     def q(self, state, chunk):
@@ -52,8 +54,8 @@ def test_guidance_moves_the_chunk_toward_higher_q_within_the_bound(policy):
     corrections = []
     guide_for = guidance.guide
 
-    def recording_guide(p, b, repeats=1):
-        g = guide_for(p, b, repeats)
+    def recording_guide(p, b, repeats=1, features=None):
+        g = guide_for(p, b, repeats, features)
 
         def wrapped(x):
             c = g(x)
@@ -65,6 +67,7 @@ def test_guidance_moves_the_chunk_toward_higher_q_within_the_bound(policy):
     guidance.guide = recording_guide
     selector = QRerankSelector(guidance.critic, n=1, guidance=guidance)
     guided = selector(policy, batch, torch.Generator().manual_seed(0))
+    assert guidance.critic.encodes == 1  # one encoding served the guide and the ranking
     end = _last_relative_position(policy, batch, guided)
     before, after = (start - target).norm().item(), (end - target).norm().item()
     assert after < before - 0.01, (before, after)  # at least 1 cm closer (the last step alone: <= 2.1)
@@ -92,6 +95,8 @@ def test_guidance_refuses_epsilon_policies_and_bad_bounds():
         QGuidance(TargetCritic(torch.zeros(3)), scale=0.0, max_step=0.02)
     with pytest.raises(ValueError, match="guidance_max_step"):
         QGuidance(TargetCritic(torch.zeros(3)), scale=1.0, max_step=2.0)
+    with pytest.raises(ValueError, match="selector's own critic"):
+        QRerankSelector(TargetCritic(torch.zeros(3)), n=2, guidance=guidance)
 
 
 def test_suite_flags_need_a_critic_and_enter_the_run_key(tmp_path):

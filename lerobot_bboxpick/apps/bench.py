@@ -268,30 +268,46 @@ def bench_training_levers(batch_size: int = 32, steps: int = 6) -> str:
             f"| {name} | {st:.3f} | {batch_size / st:.1f} | {base / st:.2f}x | {enc:.3f} | {aug:.3f} |"
         )
     with tempfile.TemporaryDirectory() as tmp:
-        rate = _dataset_sample_rate(Path(tmp))
+        rates = _dataset_sample_rates(Path(tmp))
     lines.append(
-        f"\nLeRobotDataset, one process: {rate:.0f} samples/s (2 frames + state + bbox + 16-step action per "
-        "sample, video decoded); lerobot-train's data loader worker shares the 2 cores with the step."
+        "\nLeRobotDataset `__getitem__`, one process (a 16-step action and the video frame decoded "
+        "per sample); lerobot-train's loader worker shares the 2 cores with the step:\n"
     )
+    lines += ["| observation window | samples/s | ratio |", "|---|---|---|"]
+    base_rate = next(iter(rates.values()))
+    lines += [f"| {name} | {r:.0f} | {r / base_rate:.2f}x |" for name, r in rates.items()]
     return "\n".join(lines)
 
 
-def _dataset_sample_rate(tmp: Path, samples: int = 96) -> float:
-    """Samples/s of ``LeRobotDataset.__getitem__`` with the policy's delta timestamps, one process."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+# The loader's cost depends on the observation window (LeRobotDataset queries one window per key with
+# delta timestamps; a single current step is read from the frame's own row).
+LOADER_WINDOWS: dict[str, dict[str, Any]] = {
+    "preset: 2 observed steps": {},
+    "fast encoder: 1 observed step": {"n_obs_steps": 1, "image_size": 64},
+}
+
+
+def _dataset_sample_rates(tmp: Path, samples: int = 96) -> dict[str, float]:
+    """Samples/s of ``LeRobotDataset.__getitem__`` per ``LOADER_WINDOWS`` entry, one process, with the
+    delta timestamps lerobot-train derives from that policy config."""
+    from lerobot.datasets.factory import resolve_delta_timestamps
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 
     from lerobot_bboxpick.data.collect import CollectConfig, collect
 
     collect(CollectConfig(repo_id="bench/data", root=tmp / "ds", episodes=2, workers=1))
-    window = {"observation.images.wrist": [-0.05, 0.0], "observation.state": [-0.05, 0.0]}
-    window |= {"observation.bbox": [-0.05, 0.0], "action": [i / 20 for i in range(16)]}
-    dataset = LeRobotDataset("bench/data", root=tmp / "ds", delta_timestamps=window)
-    order = np.random.default_rng(0).integers(0, len(dataset), samples).tolist()
-    dataset[order[0]]
-    t0 = time.perf_counter()
-    for i in order:
-        dataset[i]
-    return samples / (time.perf_counter() - t0)
+    meta = LeRobotDatasetMetadata("bench/data", root=tmp / "ds")
+    rates = {}
+    for name, overrides in LOADER_WINDOWS.items():
+        window = resolve_delta_timestamps(_lever_policy(overrides).config, meta)
+        dataset = LeRobotDataset("bench/data", root=tmp / "ds", delta_timestamps=window)
+        order = np.random.default_rng(0).integers(0, len(dataset), samples).tolist()
+        dataset[order[0]]
+        t0 = time.perf_counter()
+        for i in order:
+            dataset[i]
+        rates[name] = samples / (time.perf_counter() - t0)
+    return rates
 
 
 # Inference-speed levers, each a set of bbox_diffusion config overrides timed beside the preset in one run

@@ -37,11 +37,16 @@ class QGuidance:
         if not 0 < self.max_step <= 1:
             raise ValueError(f"guidance_max_step={self.max_step!r} must be in (0, 1] (scaled action units)")
 
-    def guide(self, policy, batch: dict[str, Tensor], repeats: int = 1) -> Guide:
+    def guide(
+        self, policy, batch: dict[str, Tensor], repeats: int = 1, features: Tensor | None = None
+    ) -> Guide:
         """The guide for sampling ``policy`` ``repeats`` times per observation of ``batch``
-        ``(B, n_obs, ...)`` (samples ordered as ``repeat_interleave``); each observation is encoded once."""
+        ``(B, n_obs, ...)`` (samples ordered as ``repeat_interleave``); each observation is encoded once,
+        or not at all when the caller passes the critic's ``features`` ``(B, D)`` of ``batch``."""
         with torch.no_grad():
-            state = self.critic.encode(batch).repeat_interleave(repeats, dim=0)
+            if features is None:
+                features = self.critic.encode(batch)
+            state = features.repeat_interleave(repeats, dim=0)
         scaler = policy.model.action_scaler  # fixed scales, the same in the EMA copy
         self.q_trace = []
 

@@ -51,13 +51,16 @@ def rerank_by_q(q_fn: Callable[[Tensor, Tensor], Tensor], state: Tensor, candida
 
 
 @torch.no_grad()
-def rerank_absolute(critic, batch: dict[str, Tensor], candidates: Tensor) -> RerankResult:
+def rerank_absolute(
+    critic, batch: dict[str, Tensor], candidates: Tensor, features: Tensor | None = None
+) -> RerankResult:
     """Rerank absolute chunks ``(B, N, H, 10)`` (what the policy returns) for observations ``batch``
     (``(B, n_obs, ...)``, the policy's input); ``best`` is absolute too.
 
-    The observation is encoded once per state, not once per candidate.
+    The observation is encoded once per state, not once per candidate (not at all when the caller
+    passes the critic's ``features`` ``(B, D)`` of ``batch``).
     """
-    state = critic.encode(batch)
+    state = critic.encode(batch) if features is None else features
     current = batch[STATE][:, -1]  # the pose the critic's chunks are relative to
     relative = relative_pose10_torch(candidates.float(), current[:, None].float())
     result = rerank_by_q(critic.q, state, relative)
@@ -72,14 +75,16 @@ def sample_chunks(
     n: int,
     generator: torch.Generator | None = None,
     guidance: QGuidance | None = None,
+    features: Tensor | None = None,
 ) -> Tensor:
     """``n`` absolute chunks ``(B, n, H, 10)`` per observation of ``batch``, drawn from
-    ``policy.predict_action_chunk`` in one batch (each steered by ``guidance`` when given)."""
+    ``policy.predict_action_chunk`` in one batch (each steered by ``guidance`` when given; ``features``:
+    the guidance critic's encoding of ``batch`` if the caller has it)."""
     if n < 1:
         raise ValueError(f"n={n} must be >= 1")
     b = batch[STATE].shape[0]
     repeated = {k: v.repeat_interleave(n, dim=0) for k, v in batch.items() if isinstance(v, Tensor)}
-    guide = guidance.guide(policy, batch, repeats=n) if guidance is not None else None
+    guide = guidance.guide(policy, batch, n, features) if guidance is not None else None
     chunks = policy.predict_action_chunk(repeated, generator=generator, guide=guide)
     return chunks.view(b, n, *chunks.shape[1:])
 
@@ -110,6 +115,8 @@ class QRerankSelector:
         if n < 1:
             raise ValueError(f"rerank samples n={n} must be >= 1")
         self.critic, self.n, self.perturbations = critic, n, tuple(perturbations)
+        if guidance is not None and guidance.critic is not critic:
+            raise ValueError("QRerankSelector: guidance must use the selector's own critic")
         self.guidance = guidance
         self.last: RerankResult | None = None  # the latest choice, for diagnostics
 
@@ -129,7 +136,10 @@ class QRerankSelector:
 
     def __call__(self, policy, stacked: dict[str, Tensor], generator: torch.Generator | None) -> Tensor:
         """The chosen absolute chunk ``(B, H, 10)`` for observations ``stacked``."""
-        draws = sample_chunks(policy, stacked, self.n, generator, self.guidance)
+        # One encoding of the observations serves the guide and the ranking (the same critic).
+        with torch.no_grad():
+            features = self.critic.encode(stacked)
+        draws = sample_chunks(policy, stacked, self.n, generator, self.guidance, features)
         candidates = self._with_residuals(draws)
-        self.last = rerank_absolute(self.critic, stacked, candidates)
+        self.last = rerank_absolute(self.critic, stacked, candidates, features)
         return self.last.best
