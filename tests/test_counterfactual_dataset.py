@@ -103,8 +103,8 @@ def small_config(out_dir: Path, **overrides) -> CounterfactualConfig:
     return CounterfactualConfig(**{**options, **overrides})
 
 
-def _run(out_dir: Path) -> CounterfactualConfig:
-    cfg = small_config(out_dir)
+def _run(out_dir: Path, **overrides) -> CounterfactualConfig:
+    cfg = small_config(out_dir, **overrides)
     run_counterfactual(cfg)
     return cfg
 
@@ -112,7 +112,8 @@ def _run(out_dir: Path) -> CounterfactualConfig:
 @pytest.mark.slow
 def test_same_options_same_dataset_and_true_labels(tmp_path):
     cfg = _run(tmp_path / "a")
-    a, b = load_points(tmp_path / "a"), load_points(_run(tmp_path / "b").out_dir)
+    # b also records its picking branches as episodes: that must not change a single branch.
+    a, b = load_points(tmp_path / "a"), load_points(_run(tmp_path / "b", success_demos=True).out_dir)
     assert a.kinds == ["policy", "sample1", "z+0.050", "z-0.050", "expert"] == cfg.candidate_kinds
     assert len(a) == 2 and a.step.tolist() == [0, 24]  # chunk boundaries 0 and 2 (12 steps each)
     for name in ("image", "state", "bbox", "candidates", "outcome", "steps", "ret"):
@@ -130,3 +131,27 @@ def test_same_options_same_dataset_and_true_labels(tmp_path):
     # The shipped checkpoint picks grid scenes: from the episode's start some candidate succeeds.
     assert (a.outcome[0] == OUTCOMES.index("pick")).any()
     assert "| expert |" in (tmp_path / "a" / "summary.md").read_text()
+    _check_success_demos(b, tmp_path / "b" / "success_demos", n_exec=12)
+
+
+def _check_success_demos(points, root: Path, n_exec: int) -> None:
+    """Every picking branch, and only those, is an episode that starts at its branch point's observation,
+    executes its candidate's chunk first and ends with the pick."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    picks = [(p, c) for p in range(len(points)) for c in range(len(points.kinds))]
+    picks = [(p, c) for p, c in picks if points.outcome[p, c] == OUTCOMES.index("pick")]
+    assert picks, "no branch picked: nothing to check"
+    demos = LeRobotDataset("local/counterfactual_successes", root=root)
+    assert demos.meta.total_episodes == len(picks)
+    ends = np.cumsum(points.steps[tuple(zip(*picks, strict=True))])
+    assert demos.meta.total_frames == ends[-1]  # each episode is its branch's steps long
+    for e, (p, c) in enumerate(picks):
+        start = int(ends[e - 1]) if e else 0
+        first = demos.hf_dataset[start]
+        assert np.allclose(first["observation.state"].numpy(), points.state[p, -1], atol=1e-6)
+        actions = np.stack([demos.hf_dataset[start + t]["action"].numpy() for t in range(n_exec)])
+        assert np.allclose(actions, points.candidates[p, c, :n_exec], atol=1e-6)
+        last = demos.hf_dataset[int(ends[e]) - 1]
+        assert bool(last["next.success"]) and bool(last["next.done"])
+        assert int(last["episode_index"]) == e

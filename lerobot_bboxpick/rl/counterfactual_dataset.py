@@ -15,6 +15,10 @@ from the restored state, after which the policy finishes the episode (``run_bran
   chunk ramped off along that axis (``rl.chunk_perturbations``);
 * ``expert``: the scripted expert's plan from that state (it reads the simulator), when ``expert``.
 
+With ``success_demos`` every branch that picks is also recorded, from its branch point to the pick, as
+an episode of the LeRobotDataset ``out_dir/success_demos`` (``rl.branch_demos``: the imitation-data
+baseline a critic-based improvement must beat).
+
 Each candidate's label is its Monte-Carlo return from the branch point: the outcome group's terminal
 reward (``CriticDataConfig``: pick +1, miss 0, wrong -1) times ``gamma ** (steps to the terminal step)``.
 Everything is seeded by the episode seed, the branch point and the candidate, so the same options give
@@ -45,6 +49,7 @@ from tqdm import tqdm
 from lerobot_bboxpick import seeds
 from lerobot_bboxpick.keys import BBOX, STATE, WRIST_IMAGE
 from lerobot_bboxpick.parallel import check_ray, worker_pool
+from lerobot_bboxpick.rl.branch_demos import PARTS_DIR, BranchFrames, SuccessDemos, aggregate_success_demos
 from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
 from lerobot_bboxpick.rl.counterfactual import restore, run_branch, snapshot
 from lerobot_bboxpick.rl.critic_dataset import GROUP_OF_OUTCOME, CriticDataConfig
@@ -76,6 +81,8 @@ class CounterfactualConfig:
     # Per-axis perturbations of the policy's chunk, <axis>:<amount> (each tried with + and -).
     perturbations: str = "x:0.03,y:0.03,z:0.03,yaw:0.35"
     expert: bool = True
+    # Also record every picking branch as a LeRobotDataset episode (out_dir/success_demos).
+    success_demos: bool = False
     # Denoising steps per chunk (None: the checkpoint's); fewer makes every branch cheaper.
     num_inference_steps: int | None = 4
     max_steps: int = 300
@@ -129,7 +136,7 @@ class CounterfactualConfig:
         """What decides the dataset (a resumed run must match it)."""
         from lerobot_bboxpick.eval.suite import weights_digest
 
-        return {
+        key = {
             "weights": weights_digest(str(self.policy_path)),
             "branch_every": self.branch_every,
             "max_points": self.max_points,
@@ -139,6 +146,9 @@ class CounterfactualConfig:
             "gamma": self.gamma,
             "rewards": [self.rewards.reward_of(g) for g in ("success", "miss", "wrong")],
         }
+        if self.success_demos:  # earlier runs' keys stay valid
+            key["success_demos"] = True
+        return key
 
 
 def mc_return(outcome: str, steps: int, gamma: float, rewards: CriticDataConfig) -> float:
@@ -176,8 +186,11 @@ class EpisodeBrancher:
     """Runs one episode of the base policy and branches at its chunk boundaries (see the module
     docstring); installed as the policy's ``chunk_selector`` for the base rollout."""
 
-    def __init__(self, cfg: CounterfactualConfig, runner: Any, env: Any, seed: int) -> None:
+    def __init__(
+        self, cfg: CounterfactualConfig, runner: Any, env: Any, seed: int, demos: SuccessDemos | None = None
+    ) -> None:
         self.cfg, self.runner, self.env, self.seed = cfg, runner, env, seed
+        self.demos = demos  # where picking branches go, when recorded
         self.perturbations = parse_perturbations(cfg.perturbations)
         self.n_exec = runner.policy.config.n_action_steps
         self.chunk_index = 0
@@ -235,7 +248,11 @@ class EpisodeBrancher:
             policy_fn, on_step = self._branch_policy_fn(
                 state, len(first), _derived_seed(self.seed, len(self.points), 2, c)
             )
-            result = run_branch(env, snap, first, policy_fn, max(remaining, len(first)), on_step)
+            frames = BranchFrames(env, snap.observation, self.task) if self.demos is not None else None
+            hook = on_step if frames is None else frames.hook(on_step)
+            result = run_branch(env, snap, first, policy_fn, max(remaining, len(first)), hook)
+            if frames is not None and result.outcome == "pick":
+                self.demos.add(frames.frames)
             outcomes.append(OUTCOMES.index(result.outcome))
             steps.append(result.steps)
             returns.append(mc_return(result.outcome, result.steps, self.cfg.gamma, self.cfg.rewards))
@@ -272,7 +289,8 @@ def branch_episode(task: dict) -> dict:
     torch.manual_seed(seed)
     obs, info = env.reset(seed=seed)
     runner.reset()
-    brancher = EpisodeBrancher(cfg, runner, env, seed)
+    demos = SuccessDemos(Path(task["demos"])) if cfg.success_demos else None
+    brancher = EpisodeBrancher(cfg, runner, env, seed, demos)
     brancher.task = info["task"]
     runner.policy.chunk_selector = brancher
     try:
@@ -283,6 +301,8 @@ def branch_episode(task: dict) -> dict:
     finally:
         runner.policy.chunk_selector = None
     env.close()
+    if demos is not None:
+        demos.finalize()  # before the npz: a file that exists means the episode is complete
     points = brancher.points
     arrays = {k: np.stack([p[k] for p in points]) for k in points[0]} if points else {}
     path = Path(task["path"])
@@ -301,6 +321,7 @@ def branch_episode(task: dict) -> dict:
         "seed": seed,
         "points": len(points),
         "base_outcome": info["outcome"],
+        "success_demos": demos.episodes if demos is not None else 0,
         "seconds": round(time.perf_counter() - t0, 1),
     }
 
@@ -415,10 +436,12 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
 
     _prepare(cfg)
     threads = max(1, (mp.cpu_count() or 1) // cfg.workers)
-    tasks = []
+    tasks, names = [], []
     for setting in cfg.setting_list:
         for k in range(cfg.episodes):
-            path = cfg.out_dir / POINTS_DIR / f"{setting}_seed{cfg.seed_start + k}.npz"
+            name = f"{setting}_seed{cfg.seed_start + k}"
+            names.append(name)
+            path = cfg.out_dir / POINTS_DIR / f"{name}.npz"
             if not path.is_file():
                 tasks.append(
                     {
@@ -426,6 +449,7 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
                         "setting": setting,
                         "seed": cfg.seed_start + k,
                         "path": str(path),
+                        "demos": str(cfg.out_dir / PARTS_DIR / name),
                         "threads": threads,
                     }
                 )
@@ -445,6 +469,9 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
             bar.update()
     summary = cfg.out_dir / "summary.md"
     summary.write_text(summary_table(load_points(cfg.out_dir)))
+    if cfg.success_demos:
+        demos = aggregate_success_demos(cfg.out_dir, names)
+        log.info("picking branches as episodes: %s", demos or "none (no branch picked)")
     return summary
 
 
