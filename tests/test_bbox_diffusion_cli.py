@@ -30,12 +30,11 @@ def dataset(tmp_path_factory):
     return root
 
 
-@pytest.fixture(scope="module")
-def checkpoint(dataset, tmp_path_factory):
-    out = tmp_path_factory.mktemp("bd_train") / "train"
+def train_two_steps(policy_args: list[str], dataset: Path, out: Path) -> Path:
+    """``lerobot-train`` for 2 steps of batch 2 on the test dataset; its last checkpoint."""
     cmd = [
         BIN / "lerobot-train",
-        *TINY,
+        *policy_args,
         "--dataset.repo_id=test/bd",
         f"--dataset.root={dataset}",
         f"--output_dir={out}",
@@ -48,7 +47,12 @@ def checkpoint(dataset, tmp_path_factory):
     ]
     result = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=_env())
     assert result.returncode == 0, result.stderr[-4000:]
-    path = out / "checkpoints" / "last" / "pretrained_model"
+    return out / "checkpoints" / "last" / "pretrained_model"
+
+
+@pytest.fixture(scope="module")
+def checkpoint(dataset, tmp_path_factory):
+    path = train_two_steps(TINY, dataset, tmp_path_factory.mktemp("bd_train") / "train")
     assert (path / "model.safetensors").exists() and (path / "policy_postprocessor.json").exists()
     return path
 
@@ -154,3 +158,33 @@ def test_checkpoint_actions_are_absolute_poses_composed_with_the_observed_pose(c
     expected = absolute_pose10_torch(relative[:, :1], state)[:, 0]
     assert (action - expected).abs().max() < 1e-5
     assert (action - relative[:, 0]).abs().max() > 0.1  # composed: the TCP is ~0.5 m from the origin
+
+
+@pytest.mark.slow
+def test_train_fine_tunes_a_checkpoint_with_advantage_weights_and_an_anchor(checkpoint, dataset, tmp_path):
+    """``lerobot-train --policy.path=<checkpoint>`` with ``--policy.awr_critic_path`` and
+    ``--policy.anchor_policy_path`` fine-tunes with the advantage-weighted objective; the saved checkpoint
+    holds the policy's weights only."""
+    from safetensors.torch import load_file
+
+    from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
+    from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
+
+    critic = tmp_path / "critic"
+    small = IqlCriticConfig(state_embed_dim=32, action_embed_dim=16, hidden_dim=32)
+    IqlCriticModel.from_policy_checkpoint(small, checkpoint).save_pretrained(critic)
+    fine_tuning = [
+        f"--policy.path={checkpoint}",
+        "--policy.use_amp=false",
+        f"--policy.awr_critic_path={critic}",
+        f"--policy.anchor_policy_path={checkpoint}",
+    ]
+    tuned = train_two_steps(fine_tuning, dataset, tmp_path / "awr")
+    config = json.loads((tuned / "config.json").read_text())
+    assert (config["awr_critic_path"], config["anchor_policy_path"]) == (str(critic), str(checkpoint))
+    before, after = load_file(checkpoint / "model.safetensors"), load_file(tuned / "model.safetensors")
+    assert before.keys() == after.keys()  # neither the critic nor the reference is saved with it
+    moved = max(
+        (after[k].float() - before[k].float()).abs().max().item() for k in before if k.startswith("model.")
+    )
+    assert moved > 0  # it trained from the checkpoint's weights

@@ -119,6 +119,20 @@ class BboxDiffusionConfig(PreTrainedConfig):
     ema_power: float = 0.75
     ema_max_decay: float = 0.9999
 
+    # Advantage-weighted fine-tuning (paper section 6.2; ``lerobot_bboxpick.rl.advantage_weighting``), off
+    # unless a critic or a reference is given. Each chunk's denoising loss is weighted by
+    # min(exp(A / awr_temperature), awr_max_weight), A = Q(s, a) - V(s) of the frozen critic at
+    # ``awr_critic_path`` (a ``bboxpick-train-critic`` / ``bboxpick-train-mc-critic`` checkpoint warm-started
+    # from this policy); ``awr_bc_weight`` adds the unweighted loss, and ``anchor_weight`` an MSE between
+    # this model's denoised prediction and the frozen reference policy's at ``anchor_policy_path`` (same
+    # noisy chunk, timestep and augmented observation): the paper's stabilisers. Training only.
+    awr_critic_path: str | None = None
+    awr_temperature: float = 1.0
+    awr_max_weight: float = 20.0
+    awr_bc_weight: float = 1.0
+    anchor_policy_path: str | None = None
+    anchor_weight: float = 0.5
+
     # Checkpoints stay local unless asked: this machine (and many labs) has no Hub access.
     push_to_hub: bool = False
     normalization_mapping: dict[str, NormalizationMode] = field(
@@ -151,6 +165,13 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"control_fps={self.control_fps!r} must be in (0, 1000] Hz")
         if not 0.5 <= self.crop_ratio <= 1.0:
             raise ValueError(f"crop_ratio={self.crop_ratio} must be in [0.5, 1]")
+        if not self.awr_temperature > 0.0:
+            raise ValueError(f"awr_temperature={self.awr_temperature!r} must be > 0")
+        if not self.awr_max_weight >= 1.0:
+            raise ValueError(f"awr_max_weight={self.awr_max_weight!r} must be >= 1")
+        for name in ("awr_bc_weight", "anchor_weight"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
 
     def get_optimizer_preset(self) -> AdamWConfig:
         """AdamW with UMI's settings."""

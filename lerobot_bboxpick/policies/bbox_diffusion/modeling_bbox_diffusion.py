@@ -16,6 +16,7 @@ import warnings
 from collections import deque
 from collections.abc import Callable
 from copy import deepcopy
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -71,6 +72,25 @@ class PoseScaler(nn.Module):
     def inverse(self, scaled: Tensor) -> Tensor:
         """Unscale."""
         return scaled * self.scale + self.offset
+
+
+@dataclass
+class DenoisingTerms:
+    """One training draw's per-sample denoising losses (B,) and predictions (B, horizon, 10)."""
+
+    loss: Tensor
+    prediction: Tensor
+    reference_prediction: Tensor | None = None
+
+
+def _rng_states(devices: list[torch.device]) -> list[Tensor]:
+    return [torch.get_rng_state()] + [torch.cuda.get_rng_state(d) for d in devices]
+
+
+def _set_rng_states(states: list[Tensor], devices: list[torch.device]) -> None:
+    torch.set_rng_state(states[0])
+    for state, device in zip(states[1:], devices, strict=True):
+        torch.cuda.set_rng_state(state, device)
 
 
 class BboxDiffusionModel(nn.Module):
@@ -151,7 +171,18 @@ class BboxDiffusionModel(nn.Module):
     def compute_loss(self, batch: dict[str, Tensor]) -> Tensor:
         """Denoising loss with UMI's input perturbation on the chunk ``batch[ACTION]`` (absolute poses),
         made relative to the latest observed pose first."""
+        return self.denoising_terms(batch).loss.mean()
+
+    def denoising_terms(
+        self, batch: dict[str, Tensor], reference: "BboxDiffusionModel | None" = None
+    ) -> DenoisingTerms:
+        """Per-sample denoising losses of one training draw (augmentation, noise, timesteps), and, given
+        a frozen ``reference`` model of the same architecture, its prediction for the same draw: the
+        same noisy chunk and timestep, and the same crop and colour jitter of the observation (its
+        augmentation replays this model's random draws)."""
         images, states, bboxes = self._inputs(batch)
+        devices = [states.device] if states.device.type == "cuda" else []
+        augmentation_draws = _rng_states(devices)  # where this model's crop and jitter draws start
         cond = self.global_condition(images, states, bboxes)
         with torch.autocast(states.device.type, enabled=False):  # millimetres of 0.5 m poses: float32
             relative = relative_pose10_torch(batch[ACTION].float(), states[:, -1].float())
@@ -165,7 +196,16 @@ class BboxDiffusionModel(nn.Module):
         noisy = self.noise_scheduler.add_noise(trajectory, perturbed, timesteps)
         prediction = self.unet(noisy, timesteps, global_cond=cond)
         target = noise if self.config.prediction_type == "epsilon" else trajectory
-        return F.mse_loss(prediction, target)
+        loss = F.mse_loss(prediction, target, reduction="none").mean(dim=(1, 2))
+        reference_prediction = None
+        if reference is not None:
+            # Replaying the augmentation's draws gives the reference the same crop and jitter; the fork
+            # puts the generators back where the noise draws left them.
+            with torch.no_grad(), torch.random.fork_rng(devices=devices):
+                _set_rng_states(augmentation_draws, devices)
+                reference_cond = reference.global_condition(images, states, bboxes)
+                reference_prediction = reference.unet(noisy, timesteps, global_cond=reference_cond)
+        return DenoisingTerms(loss=loss, prediction=prediction, reference_prediction=reference_prediction)
 
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> nn.Module:
         """The UNet to call during sampling: its TorchScript trace in eval mode (``jit_inference``), else
@@ -238,6 +278,9 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         self.ema_model = deepcopy(self.model).requires_grad_(False) if config.use_ema else None
         self._ema_updates = 0
         self.chunk_selector: ChunkSelector | None = None
+        # The advantage-weighted objective (rl.advantage_weighting), built on the first training batch
+        # when the config asks for it; its frozen critic and reference are not modules of this policy.
+        self._fine_tuning = None
         # Seconds on one monotonic clock; latency compensation reads it (tests set a fake one).
         self.clock: Callable[[], float] = time.monotonic
         self.reset()
@@ -278,7 +321,14 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         self._actions: deque[Tensor] = deque()
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
-        """Training loss."""
+        """Training loss: the denoising loss, or the advantage-weighted objective when the config names a
+        critic or a reference policy (``awr_critic_path`` / ``anchor_policy_path``)."""
+        if self._fine_tuning is None and (self.config.awr_critic_path or self.config.anchor_policy_path):
+            from lerobot_bboxpick.rl.advantage_weighting import AdvantageWeightedLoss  # rl imports us
+
+            self._fine_tuning = AdvantageWeightedLoss.from_config(self.config)
+        if self._fine_tuning is not None:
+            return self._fine_tuning(self.model, batch)
         loss = self.model.compute_loss(batch)
         return loss, {"diffusion_loss": loss.item()}
 
