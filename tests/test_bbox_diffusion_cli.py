@@ -161,30 +161,55 @@ def test_checkpoint_actions_are_absolute_poses_composed_with_the_observed_pose(c
 
 
 @pytest.mark.slow
-def test_train_fine_tunes_a_checkpoint_with_advantage_weights_and_an_anchor(checkpoint, dataset, tmp_path):
-    """``lerobot-train --policy.path=<checkpoint>`` with ``--policy.awr_critic_path`` and
-    ``--policy.anchor_policy_path`` fine-tunes with the advantage-weighted objective; the saved checkpoint
-    holds the policy's weights only."""
+def test_train_fine_tunes_a_checkpoint_with_advantage_weights_an_anchor_and_relabels(
+    checkpoint, dataset, tmp_path
+):
+    """``bboxpick-parl-relabel``'s pass over the dataset, then ``lerobot-train --policy.path=<checkpoint>``
+    with ``--policy.awr_critic_path``, ``--policy.anchor_policy_path`` and ``--policy.parl_cache_path``:
+    the critic-based fine-tuning objectives run in LeRobot's own loop; the saved checkpoint holds the
+    policy's weights only."""
     from safetensors.torch import load_file
 
     from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
     from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
+    from lerobot_bboxpick.rl.parl_relabel import ParlRelabelConfig, relabel_dataset
 
     critic = tmp_path / "critic"
     small = IqlCriticConfig(state_embed_dim=32, action_embed_dim=16, hidden_dim=32)
     IqlCriticModel.from_policy_checkpoint(small, checkpoint).save_pretrained(critic)
+    cache = tmp_path / "relabels.safetensors"
+    report = relabel_dataset(
+        ParlRelabelConfig(
+            repo_id="test/bd", root=dataset, policy_path=checkpoint, critic_path=critic, out=cache,
+            frame_stride=8, samples=2, ascent_steps=2, progress=False,
+        )
+    )  # fmt: skip
+    frames = load_file(cache)["index"]
+    episode_lengths = [len(ep) for ep in _episode_rows(dataset)]
+    assert len(frames) == report["frames"] == sum((n + 7) // 8 for n in episode_lengths)
+    assert 0.0 <= report["valid_fraction"] <= 1.0 and report["mean_chosen_q"] >= report["mean_dataset_q"]
     fine_tuning = [
         f"--policy.path={checkpoint}",
         "--policy.use_amp=false",
         f"--policy.awr_critic_path={critic}",
         f"--policy.anchor_policy_path={checkpoint}",
+        f"--policy.parl_cache_path={cache}",
     ]
     tuned = train_two_steps(fine_tuning, dataset, tmp_path / "awr")
     config = json.loads((tuned / "config.json").read_text())
-    assert (config["awr_critic_path"], config["anchor_policy_path"]) == (str(critic), str(checkpoint))
+    assert (config["awr_critic_path"], config["parl_cache_path"]) == (str(critic), str(cache))
     before, after = load_file(checkpoint / "model.safetensors"), load_file(tuned / "model.safetensors")
     assert before.keys() == after.keys()  # neither the critic nor the reference is saved with it
     moved = max(
         (after[k].float() - before[k].float()).abs().max().item() for k in before if k.startswith("model.")
     )
     assert moved > 0  # it trained from the checkpoint's weights
+
+
+def _episode_rows(root: Path) -> list[list[int]]:
+    import numpy as np
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    hf = LeRobotDataset("test/bd", root=root).hf_dataset.select_columns(["episode_index"])
+    episodes = np.asarray(hf.with_format("numpy")[:]["episode_index"]).reshape(-1)
+    return [np.flatnonzero(episodes == ep).tolist() for ep in np.unique(episodes)]

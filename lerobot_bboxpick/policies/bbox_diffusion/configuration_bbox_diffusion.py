@@ -132,6 +132,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
     awr_bc_weight: float = 1.0
     anchor_policy_path: str | None = None
     anchor_weight: float = 0.5
+    # PA-RL (paper section 6.3; ``lerobot_bboxpick.rl.pa_rl``): a ``bboxpick-parl-relabel`` cache of
+    # critic-optimised chunks by dataset frame index; where its entry is valid, the loss imitates that
+    # chunk instead of the dataset's (with ``anchor_policy_path``: the paper's anchor). Training only.
+    parl_cache_path: str | None = None
 
     # Checkpoints stay local unless asked: this machine (and many labs) has no Hub access.
     push_to_hub: bool = False

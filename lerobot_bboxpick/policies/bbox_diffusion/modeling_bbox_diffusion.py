@@ -281,6 +281,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         # The advantage-weighted objective (rl.advantage_weighting), built on the first training batch
         # when the config asks for it; its frozen critic and reference are not modules of this policy.
         self._fine_tuning = None
+        self._relabels = None  # the PA-RL relabel cache (rl.pa_rl), loaded on the first training batch
         # Seconds on one monotonic clock; latency compensation reads it (tests set a fake one).
         self.clock: Callable[[], float] = time.monotonic
         self.reset()
@@ -322,7 +323,14 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
         """Training loss: the denoising loss, or the advantage-weighted objective when the config names a
-        critic or a reference policy (``awr_critic_path`` / ``anchor_policy_path``)."""
+        critic or a reference policy (``awr_critic_path`` / ``anchor_policy_path``), on the batch's action
+        chunks or, where a PA-RL cache (``parl_cache_path``) holds a valid entry, on its optimised ones."""
+        if self._relabels is None and self.config.parl_cache_path:
+            from lerobot_bboxpick.rl.pa_rl import RelabelCache  # rl imports us
+
+            self._relabels = RelabelCache.load(self.config.parl_cache_path)
+        if self._relabels is not None:
+            batch = self._relabels.apply(batch)
         if self._fine_tuning is None and (self.config.awr_critic_path or self.config.anchor_policy_path):
             from lerobot_bboxpick.rl.advantage_weighting import AdvantageWeightedLoss  # rl imports us
 
