@@ -63,18 +63,18 @@ if want validation_fast_encoder; then
 fi
 # Batch size against updates for the quick profile (fast encoder, float32, the same 60 grid demos), on
 # validation seeds 5000-5019 of grid_id: batch 16 / 1900 steps and 8 / 2900 at lr 3e-4, then batch 8 / 2000
-# steps at lr 1e-3 (about the slowest machine's 9-minute budget of batch-8 steps).
+# steps at lr 1e-3 (about the slowest machine's 9-minute budget of batch-8 steps), batch 8 with training seed 1.
 if want validation_quick_batch; then
   X=outputs/exp
   bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
     --workers=2 --resume=true
-  for run in "b16 1900 16 3e-4" "b8 2900 8 3e-4" "b8lr1e3_2000 2000 8 1e-3"; do
+  for run in "b16 1900 16 3e-4" "b8 2900 8 3e-4" "b8lr1e3_2000 2000 8 1e-3" "b8_seed1 2900 8 3e-4 1"; do
     set -- $run
     [ -f $X/train_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
       --policy.type=bbox_diffusion --policy.device=cpu --policy.use_amp=false --policy.image_size=64 \
       --policy.n_obs_steps=1 --policy.scheduler_warmup_steps=100 --policy.optimizer_lr=$4 \
       --dataset.repo_id=local/grid60 --dataset.root=$X/grid60 --output_dir=$X/train_$1 --steps=$2 \
-      --batch_size=$3 --num_workers=1 --save_freq=$2 --log_freq=20 --wandb.enable=false
+      --batch_size=$3 --num_workers=1 --save_freq=$2 --log_freq=20 --wandb.enable=false ${5:+--seed=$5}
     bboxpick-suite --policies=$1=$X/train_$1/checkpoints/last/pretrained_model --settings=grid_id \
       --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_$1
     publish $X/val_$1 validation_quick_$1
