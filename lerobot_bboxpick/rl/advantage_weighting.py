@@ -21,6 +21,7 @@ from lerobot.utils.constants import ACTION
 from torch import Tensor
 
 from lerobot_bboxpick.geometry import relative_pose10_torch
+from lerobot_bboxpick.keys import STATE
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionModel
 from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel, load_policy
@@ -80,7 +81,7 @@ class AdvantageWeightedLoss:
     def advantages(self, model: BboxDiffusionModel, batch: dict[str, Tensor]) -> Tensor:
         """``Q(s, a) - V(s)`` (B,) of the batch's chunks under the frozen critic."""
         images, states, bboxes = model._inputs(batch)
-        observations = {model.config.image_key: images, "observation.state": states}
+        observations = {model.config.image_key: images, STATE: states}
         if bboxes is not None:
             observations[model.config.bbox_feature_key] = bboxes
         features = self.critic.encode(observations)

@@ -24,6 +24,7 @@ from torch import Tensor
 
 from lerobot_bboxpick.geometry import absolute_pose10_torch, relative_pose10_torch
 from lerobot_bboxpick.keys import STATE
+from lerobot_bboxpick.rl.rerank import rerank_by_q
 
 OPTIMISED_DIMS = [0, 1, 2, 9]  # x, y, z, gripper width: rot6d entries off their manifold are not poses
 INDEX = "index"  # LeRobotDataset's global frame index, in every training batch
@@ -61,24 +62,24 @@ class ChunkOptimiser:
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be > 0")
 
-    def _q(self, features: Tensor, relative: Tensor) -> Tensor:
-        return self.critic.q(features, relative)
-
-    def ascend(self, features: Tensor, start: Tensor) -> tuple[Tensor, Tensor]:
-        """Local step from relative chunks ``start`` (M, H, 10): (optimised chunks, reverted (M,) bool)."""
+    def ascend(self, features: Tensor, start: Tensor, start_q: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Local step from relative chunks ``start`` (M, H, 10) whose Q is ``start_q`` (M,): the optimised
+        chunks, their Q, and which were reverted (M,) because their Q did not improve."""
         mask = torch.zeros_like(start)
         mask[..., OPTIMISED_DIMS] = 1.0
         chunk = start.clone()
         with torch.enable_grad():
             for _ in range(self.ascent_steps):
                 chunk.requires_grad_(True)
-                (grad,) = torch.autograd.grad(self._q(features, chunk).sum(), chunk)
+                (grad,) = torch.autograd.grad(self.critic.q(features, chunk).sum(), chunk)
                 moved = chunk.detach() + self.step_size * grad * mask
                 chunk = start + (moved - start).clamp(-self.max_offset, self.max_offset)
         with torch.no_grad():
-            reverted = self._q(features, chunk) <= self._q(features, start)
+            q = self.critic.q(features, chunk)
+            reverted = q <= start_q
             chunk = torch.where(reverted[:, None, None], start, chunk)
-        return chunk, reverted
+            q = torch.where(reverted, start_q, q)
+        return chunk, q, reverted
 
     @torch.no_grad()
     def relabel(
@@ -91,24 +92,24 @@ class ChunkOptimiser:
         candidates = torch.cat([dataset_chunks[:, None], proposals], dim=1).float()  # dataset chunk first
         relative = relative_pose10_torch(candidates, current[:, None])
         features = self.critic.encode(observations)
-        rep = features.repeat_interleave(n + 1, dim=0)
-        scores = self._q(rep, relative.flatten(0, 1)).view(b, n + 1)
+        ranked = rerank_by_q(self.critic.q, features, relative)  # the global step
         k = min(self.top_k, n + 1)
-        top = scores.topk(k, dim=1).indices  # (B, k)
+        top_q, top = ranked.scores.topk(k, dim=1)  # (B, k)
         starts = relative[torch.arange(b)[:, None], top]  # (B, k, H, 10)
-        optimised, reverted = self.ascend(features.repeat_interleave(k, dim=0), starts.flatten(0, 1))
-        final = self._q(features.repeat_interleave(k, dim=0), optimised).view(b, k)
-        best = final.argmax(dim=1)
+        optimised, final, reverted = self.ascend(
+            features.repeat_interleave(k, dim=0), starts.flatten(0, 1), top_q.flatten()
+        )
+        best = final.view(b, k).argmax(dim=1)
         chosen = optimised.view(b, k, *optimised.shape[1:])[torch.arange(b), best]
         chosen_abs = absolute_pose10_torch(chosen, current)
-        chosen_q, dataset_q = final[torch.arange(b), best], scores[:, 0]
+        chosen_q, dataset_q = final.view(b, k)[torch.arange(b), best], ranked.scores[:, 0]
         return Relabelled(
             actions=chosen_abs,
             valid=torch.isfinite(chosen_abs).all(dim=(1, 2)) & (chosen_q > dataset_q),
             chosen_q=chosen_q,
             dataset_q=dataset_q,
-            global_spread=scores.std(dim=1),
-            dataset_won=scores.argmax(dim=1) == 0,
+            global_spread=ranked.scores.std(dim=1),
+            dataset_won=ranked.index == 0,
             reverted=reverted.view(b, k),
             drift=(chosen_abs[:, -1, :3] - dataset_chunks[:, -1, :3].float()).norm(dim=-1),
         )
