@@ -181,13 +181,14 @@ def test_train_fine_tunes_a_checkpoint_with_advantage_weights_an_anchor_and_rela
     report = relabel_dataset(
         ParlRelabelConfig(
             repo_id="test/bd", root=dataset, policy_path=checkpoint, critic_path=critic, out=cache,
-            frame_stride=8, samples=2, ascent_steps=2, progress=False,
+            frame_stride=8, samples=2, ascent_steps=2, num_inference_steps=2, progress=False,
         )
     )  # fmt: skip
     frames = load_file(cache)["index"]
     episode_lengths = [len(ep) for ep in _episode_rows(dataset)]
     assert len(frames) == report["frames"] == sum((n + 7) // 8 for n in episode_lengths)
     assert 0.0 <= report["valid_fraction"] <= 1.0 and report["mean_chosen_q"] >= report["mean_dataset_q"]
+    assert report["config"]["num_inference_steps"] == "2"
     fine_tuning = [
         f"--policy.path={checkpoint}",
         "--policy.use_amp=false",

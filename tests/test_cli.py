@@ -56,7 +56,11 @@ def test_run_trains_the_recipe_and_the_ablation_without_a_centroid(tmp_path):
     args = train_command(full, tmp_path / "data", "local/x", tmp_path / "train", 5000, True)
     recipe = {"--policy.bbox_mode=mask", "--policy.mask_centroid=true", "--policy.n_action_steps=12"}
     assert recipe <= set(args)
-    assert "--steps=5000" in args and "--batch_size=32" in args
+    assert {"--steps=5000", "--batch_size=32", "--seed=1000"} <= set(args)
+    reseeded = train_command(
+        replace(full, train_seed=1), tmp_path / "data", "local/x", tmp_path / "train", 5000, True
+    )
+    assert set(reseeded) - set(args) == {"--seed=1"}
     ablation = train_command(
         replace(full, bbox_mode="none"), tmp_path / "data", "local/x", tmp_path / "t", 5000, True
     )

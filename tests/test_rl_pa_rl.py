@@ -59,7 +59,13 @@ def test_ascent_reaches_past_every_proposal_within_the_trust_region():
     assert bool(result.valid[0]) and not bool(result.dataset_won[0])
     assert result.chosen_q.item() > result.dataset_q.item()
     assert not result.reverted.any()
-    assert result.drift.item() == pytest.approx(0.035, abs=1e-4)
+    # drift: the chosen end minus the dataset's, in the world frame (the robot's "upward drift" axis)
+    world_end = absolute_pose10_torch(straight_chunks(torch.tensor([[0.035, 0.0, 0.0]])), current)[0, -1, :3]
+    expected = world_end - dataset_chunk[0, -1, :3]
+    assert result.drift[0].tolist() == pytest.approx(expected.tolist(), abs=1e-4)
+    report = diagnostics([result])
+    assert report["mean_drift_mm"] == pytest.approx(35.0, abs=0.1)
+    assert report["mean_drift_xyz_mm"] == pytest.approx((1000 * expected).tolist(), abs=0.1)
     # only positions and width move; the rotation stays the proposal's
     assert torch.allclose(result.actions[0, :, 3:9], proposals[0, 1, :, 3:9], atol=1e-5)
 

@@ -43,6 +43,12 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="train under bf16 autocast (lerobot-train --policy.use_amp); default: the profile's choice",
     )
+    run.add_argument(
+        "--train-seed",
+        type=int,
+        default=None,
+        help="lerobot-train's --seed (default: the profile's, 1000); repeat a recipe with another seed",
+    )
     demo = sub.add_parser("demo", help="scripted-expert rollouts per setting: MP4s, contact sheet, table")
     demo.add_argument("--out-dir", type=Path, default=Path("outputs/demo"))
     demo.add_argument("--episodes", type=_positive, default=1, help="episodes per setting")
@@ -77,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         overrides = {"bbox_mode": args.bbox_mode}
         if args.amp is not None:
             overrides["use_amp"] = args.amp
+        if args.train_seed is not None:
+            overrides["train_seed"] = args.train_seed
         table = run_pipeline(args.profile, args.out_dir, **overrides)
         print(table.read_text())
         print(what_next(table, table.parent.parent / "train" / "checkpoints" / "last" / "pretrained_model"))

@@ -74,6 +74,8 @@ class Profile:
     recovery: float = 0.0
     # Settings the suite evaluates.
     suite_settings: str = ",".join(SETTINGS)
+    # lerobot-train's --seed (its default): another value repeats the recipe with a second training seed.
+    train_seed: int = 1000
 
 
 PROFILES = {
@@ -166,6 +168,7 @@ def train_command(
         f"--output_dir={out}",
         f"--steps={steps}",
         f"--batch_size={profile.batch_size}",
+        f"--seed={profile.train_seed}",
         "--num_workers=1",
         save_freq,
         f"--log_freq={LOG_FREQ}",

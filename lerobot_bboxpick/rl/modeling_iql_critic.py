@@ -36,6 +36,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import (
     BboxDiffusionPaperPolicy,
     BboxDiffusionPolicy,
     PoseScaler,
+    global_condition_dim,
 )
 from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
 from lerobot_bboxpick.rl.iql import IqlBatch, IqlCritic, IqlDims
@@ -72,11 +73,8 @@ class PolicyObservationEncoder(nn.Module):
 
     @property
     def out_dim(self) -> int:
-        """Width of the state feature: per observed step, image feature + low-dim vector
-        (the formula of ``BboxDiffusionModel.__init__``)."""
-        c = self.config
-        lowdim = 10 + (4 if c.bbox_mode == "lowdim" or c.mask_centroid else 0)
-        return c.n_obs_steps * (self.encoder.out_dim + lowdim)
+        """Width of the state feature: the policy's global condition width."""
+        return global_condition_dim(self.config, self.encoder.out_dim)
 
     def forward(self, batch: dict[str, Tensor]) -> Tensor:
         """Observations ``(B, n_obs, ...)`` (images in [0, 1], absolute states, bboxes) -> ``(B, D)``."""

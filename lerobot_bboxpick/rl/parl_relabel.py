@@ -40,6 +40,7 @@ class ParlRelabelConfig:
     out: Path = Path("outputs/parl/relabels.safetensors")
     frame_stride: int = 4  # relabel every this-many-th frame; the others keep the dataset's chunk
     samples: int = 4  # policy draws per frame (the dataset's chunk is always a candidate too)
+    num_inference_steps: int | None = None  # denoising steps per draw (None: the checkpoint's)
     top_k: int = 2
     ascent_steps: int = 10
     step_size: float = 1e-3
@@ -52,8 +53,8 @@ class ParlRelabelConfig:
         for name in ("policy_path", "critic_path"):
             if getattr(self, name) is None:
                 raise ValueError(f"{name} is required (a checkpoint folder)")
-        for name in ("frame_stride", "samples", "batch_size"):
-            if getattr(self, name) < 1:
+        for name in ("frame_stride", "samples", "batch_size", "num_inference_steps"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
                 raise ValueError(f"{name}={getattr(self, name)} must be >= 1")
         self.out = Path(self.out)
 
@@ -70,6 +71,9 @@ def relabel_dataset(cfg: ParlRelabelConfig) -> dict:
     table = load_frame_table(dataset)
     frame_index = dataset.hf_dataset.select_columns(["index"]).with_format("numpy")[:]["index"].reshape(-1)
     policy = load_policy(cfg.policy_path).eval()
+    if cfg.num_inference_steps is not None:
+        # Propose what the evaluated policy would (the suite samples with --num_inference_steps too).
+        policy.config.num_inference_steps = cfg.num_inference_steps
     critic = IqlCriticModel.from_pretrained(cfg.critic_path)
     pc, cc = policy.config, critic.encoder.config
     if (pc.horizon, pc.n_obs_steps) != (cc.horizon, cc.n_obs_steps):

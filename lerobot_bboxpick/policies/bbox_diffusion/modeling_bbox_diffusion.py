@@ -93,6 +93,13 @@ def _set_rng_states(states: list[Tensor], devices: list[torch.device]) -> None:
         torch.cuda.set_rng_state(state, device)
 
 
+def global_condition_dim(config: BboxDiffusionConfig, image_feature_dim: int) -> int:
+    """Width of the UNet's global condition: per observed step, the image feature, the scaled pose10 and
+    (with ``lowdim`` bbox mode or the mask centroid) the 4 box numbers."""
+    lowdim = 10 + (4 if config.bbox_mode == "lowdim" or config.mask_centroid else 0)
+    return config.n_obs_steps * (image_feature_dim + lowdim)
+
+
 class BboxDiffusionModel(nn.Module):
     """Observation encoder + conditional UNet + DDIM scheduler."""
 
@@ -110,11 +117,11 @@ class BboxDiffusionModel(nn.Module):
             group_norm=config.group_norm,
         )
         self.augment = PairedAugment(crop_ratio=config.crop_ratio, color_jitter=config.color_jitter)
-        lowdim = 10 + (4 if config.bbox_mode == "lowdim" or config.mask_centroid else 0)
         self.obs_scaler = PoseScaler(config.obs_position_scale, config.max_gripper_width)
         self.action_scaler = PoseScaler(config.action_position_scale, config.max_gripper_width)
-        cond_dim = config.n_obs_steps * (self.encoder.out_dim + lowdim)
-        self.unet = DiffusionConditionalUnet1d(config, global_cond_dim=cond_dim)
+        self.unet = DiffusionConditionalUnet1d(
+            config, global_cond_dim=global_condition_dim(config, self.encoder.out_dim)
+        )
         self.noise_scheduler = DDIMScheduler(
             num_train_timesteps=config.num_train_timesteps,
             beta_start=config.beta_start,
