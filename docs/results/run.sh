@@ -110,3 +110,12 @@ if want main_job; then
   bash scripts/main.sh --out-dir outputs/main_job | tee outputs/main_job.console.txt
   publish outputs/main_job/quick/suite main_job
 fi
+# A second training seed of the main job (same demos: the first run's data folder is copied, so only
+# lerobot-train's --seed differs).
+if want main_job_seed1; then
+  mkdir -p outputs/main_job_seed1/quick
+  [ -d outputs/main_job_seed1/quick/data ] || cp -r outputs/main_job/quick/data outputs/main_job_seed1/quick/
+  bash scripts/main.sh --out-dir outputs/main_job_seed1 --train-seed 1 | tee outputs/main_job_seed1.console.txt
+  publish outputs/main_job_seed1/quick/suite main_job_seed1
+  cp outputs/main_job_seed1/quick/train/sizing.json docs/results/main_job_seed1/
+fi
