@@ -119,3 +119,13 @@ if want main_job_seed1; then
   publish outputs/main_job_seed1/quick/suite main_job_seed1
   cp outputs/main_job_seed1/quick/train/sizing.json docs/results/main_job_seed1/
 fi
+# A slower machine, emulated: the main job on one core in float32 (same demos), so the time budget buys
+# fewer steps.
+if want main_job_slow1core; then
+  mkdir -p outputs/main_job_slow/quick
+  [ -d outputs/main_job_slow/quick/data ] || cp -r outputs/main_job/quick/data outputs/main_job_slow/quick/
+  OMP_NUM_THREADS=1 taskset -c 0 bash scripts/main.sh --out-dir outputs/main_job_slow --no-amp \
+    | tee outputs/main_job_slow.console.txt
+  publish outputs/main_job_slow/quick/suite main_job_slow1core
+  cp outputs/main_job_slow/quick/train/sizing.json docs/results/main_job_slow1core/
+fi
