@@ -12,7 +12,7 @@ from lerobot_bboxpick.apps.bench import _policy_features
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
 from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
-from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel
+from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel, load_policy
 
 SMALL_CRITIC = {"state_embed_dim": 64, "action_embed_dim": 32, "hidden_dim": 64}
 
@@ -117,6 +117,13 @@ def test_warm_start_from_a_saved_policy_checkpoint(policy, tmp_path):
     model = policy.ema_model.eval()
     batch = obs(2)
     assert torch.equal(critic.encode(batch), model.global_condition(*model._inputs(batch)))
+    # the loader keeps the checkpoint's denoising steps unless told otherwise (relabelling proposes at 4)
+    steps = policy.config.num_inference_steps
+    assert load_policy(tmp_path / "policy").config.num_inference_steps == steps
+    assert (
+        load_policy(tmp_path / "policy", num_inference_steps=steps + 3).config.num_inference_steps
+        == steps + 3
+    )
 
 
 def test_bad_inputs_are_refused_by_name(policy, tmp_path):

@@ -93,9 +93,10 @@ class PolicyObservationEncoder(nn.Module):
         return BboxDiffusionModel.global_condition(self, images, states, batch.get(c.bbox_feature_key))
 
 
-def load_policy(path: str | Path) -> BboxDiffusionPolicy:
+def load_policy(path: str | Path, num_inference_steps: int | None = None) -> BboxDiffusionPolicy:
     """A ``bbox_diffusion`` / ``bbox_diffusion_paper`` checkpoint (``pretrained_model`` folder), on the CPU,
-    without downloading backbone weights (the checkpoint holds them)."""
+    without downloading backbone weights (the checkpoint holds them); ``num_inference_steps`` overrides
+    its denoising steps per chunk (None: the checkpoint's), as ``--policy.num_inference_steps`` does."""
     config = PreTrainedConfig.from_pretrained(path)
     if config.type not in POLICY_CLASSES:
         raise ValueError(
@@ -103,6 +104,8 @@ def load_policy(path: str | Path) -> BboxDiffusionPolicy:
             f"the critic needs one of {sorted(POLICY_CLASSES)}"
         )
     config = dataclasses.replace(config, pretrained_backbone=False, device="cpu")
+    if num_inference_steps is not None:
+        config.num_inference_steps = num_inference_steps
     return POLICY_CLASSES[config.type].from_pretrained(path, config=config)
 
 

@@ -70,10 +70,8 @@ def relabel_dataset(cfg: ParlRelabelConfig) -> dict:
     dataset = LeRobotDataset(cfg.repo_id, root=cfg.root)
     table = load_frame_table(dataset)
     frame_index = dataset.hf_dataset.select_columns(["index"]).with_format("numpy")[:]["index"].reshape(-1)
-    policy = load_policy(cfg.policy_path).eval()
-    if cfg.num_inference_steps is not None:
-        # Propose what the evaluated policy would (the suite samples with --num_inference_steps too).
-        policy.config.num_inference_steps = cfg.num_inference_steps
+    # Propose what the evaluated policy would (the suite samples with --num_inference_steps too).
+    policy = load_policy(cfg.policy_path, cfg.num_inference_steps).eval()
     critic = IqlCriticModel.from_pretrained(cfg.critic_path)
     pc, cc = policy.config, critic.encoder.config
     if (pc.horizon, pc.n_obs_steps) != (cc.horizon, cc.n_obs_steps):
