@@ -127,8 +127,9 @@ class EpisodeRecorder:
         """A new env of ``setting`` (one per setting and worker, reused for every seed)."""
         raise NotImplementedError
 
-    def __call__(self, env: Any, seed: int) -> tuple[list[dict], str]:
-        """Record the episode of ``seed`` on ``env``: its ``make_frame`` dicts and its outcome."""
+    def __call__(self, env: Any, seed: int) -> tuple[list[dict], str] | tuple[list[dict], str, dict]:
+        """Record the episode of ``seed`` on ``env``: its ``make_frame`` dicts (none: nothing to keep)
+        and its outcome, and optionally more facts for the seed's record in ``seeds.json``."""
         raise NotImplementedError
 
 
@@ -244,8 +245,8 @@ def record_shard(task: ShardTask) -> list[dict]:
     for seed, setting in zip(task.seeds, task.settings, strict=True):
         if setting not in envs:
             envs[setting] = task.recorder.make_env(setting)
-        frames, outcome = task.recorder(envs[setting], seed)
-        kept = task.keep_failed or outcome == "pick"
+        frames, outcome, *details = task.recorder(envs[setting], seed)
+        kept = bool(frames) and (task.keep_failed or outcome == "pick")
         if kept:
             if dataset is None:
                 dataset = create_dataset(task.repo_id, partial)
@@ -253,6 +254,7 @@ def record_shard(task: ShardTask) -> list[dict]:
                 dataset.add_frame(frame)
             dataset.save_episode()
         record = {"seed": seed, "setting": setting, "outcome": outcome, "kept": kept, "frames": len(frames)}
+        record.update(*details)
         if task.recorder.run_key is not None:
             record["run_key"] = task.recorder.run_key
         records.append(record)

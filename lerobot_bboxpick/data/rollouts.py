@@ -79,6 +79,8 @@ class RolloutsConfig:
     max_steps: int = 300
     # Executed steps per predicted chunk; None keeps the checkpoint's own setting.
     n_action_steps: int | None = None
+    # Denoising steps per chunk (as bboxpick-suite --num_inference_steps); None keeps the checkpoint's.
+    num_inference_steps: int | None = None
     workers: int = 1
     # Ray cluster the workers run on: "auto", "ray://<head>:10001" or "local"; None: local processes.
     # root and policy_path must be on a file system every node shares (docs/ray.md).
@@ -106,8 +108,9 @@ class RolloutsConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
-        if self.n_action_steps is not None and self.n_action_steps < 1:
-            raise ValueError(f"n_action_steps={self.n_action_steps!r} must be >= 1 (or None: the policy's)")
+        for name in ("n_action_steps", "num_inference_steps"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 1 (or None: the policy's)")
         if self.merge_with is not None:
             self.merge_with = Path(self.merge_with)
             check_mergeable(self.merge_with)
@@ -159,6 +162,7 @@ class PolicyRecorder(EpisodeRecorder):
     policy_path: str
     max_steps: int = 300
     n_action_steps: int | None = None
+    num_inference_steps: int | None = None
     # Torch threads per worker.
     threads: int = 1
     run_key: dict | None = None
@@ -177,7 +181,7 @@ class PolicyRecorder(EpisodeRecorder):
         from lerobot_bboxpick.eval.suite import load_runner
 
         torch.set_num_threads(self.threads)
-        runner = load_runner(self.policy_path, self.n_action_steps, env)
+        runner = load_runner(self.policy_path, self.n_action_steps, env, self.num_inference_steps)
         frames: list[dict] = []
 
         def keep(obs: dict, info: dict, action: np.ndarray, reward: float, next_info: dict) -> None:
@@ -187,18 +191,29 @@ class PolicyRecorder(EpisodeRecorder):
         return close_episode(frames, result["outcome"])
 
 
-def policy_recorder(cfg: RolloutsConfig) -> PolicyRecorder:
-    """The recorder of ``cfg``, with the suite's run key of the checkpoint and options."""
+def policy_recorder(
+    cfg: RolloutsConfig, recorder_class: type[PolicyRecorder] = PolicyRecorder, **options: Any
+) -> PolicyRecorder:
+    """The recorder of ``cfg`` (a ``recorder_class`` with ``options``), with the suite's run key of the
+    checkpoint and options, and ``options`` in the key too."""
     from lerobot_bboxpick.eval.suite import SuiteConfig, run_key
 
     path = str(cfg.policy_path)
-    suite = SuiteConfig(policies=path, max_steps=cfg.max_steps, n_action_steps=cfg.n_action_steps)
-    return PolicyRecorder(
+    suite = SuiteConfig(
+        policies=path,
+        max_steps=cfg.max_steps,
+        n_action_steps=cfg.n_action_steps,
+        num_inference_steps=cfg.num_inference_steps,
+    )
+    key = run_key(suite, path) | {k: dataclasses.asdict(v) for k, v in options.items()}
+    return recorder_class(
         policy_path=path,
         max_steps=cfg.max_steps,
         n_action_steps=cfg.n_action_steps,
+        num_inference_steps=cfg.num_inference_steps,
         threads=max(1, (mp.cpu_count() or 1) // cfg.workers),
-        run_key=run_key(suite, path),
+        run_key=key,
+        **options,
     )
 
 
