@@ -75,36 +75,9 @@ if want test; then
 fi
 
 # 5. One table: Pick (Wrong) per setting on test seeds, IL beside each method, and the paired count over the
-#    same scenes (scenes the method picks and IL does not / IL picks and the method does not).
+#    same scenes (scenes the method picks and IL does not / IL picks and the method does not), pooled sign test.
 if want test || [[ $STEP == table ]]; then
-    python - > docs/offline_rl/test_table.md <<'PY'
-import json
-from pathlib import Path
-
-from lerobot_bboxpick.eval.suite import wilson_interval
-
-SETTINGS = ["grid_id", "grid_ood", "pile_id", "random_id", "identical_2", "identical_4"]
-runs = {"IL": ["docs/counterfactual/test_cf/il", "docs/counterfactual/test_cf/il_other3"],
-        "BC-FT": ["docs/offline_rl/test/bc_ft"], "AWR (T = 0.1)": ["docs/offline_rl/test/awr_t01"],
-        "PA-RL": ["docs/offline_rl/test/parl"]}
-outcome = {name: {(e["setting"], e["seed"]): e["outcome"] for d in dirs
-                  for e in map(json.loads, Path(d, "episodes.jsonl").read_text().splitlines())}
-           for name, dirs in runs.items()}
-def cell(name, setting):
-    got = [o for (s, _), o in outcome[name].items() if s == setting]
-    pick, wrong, n = got.count("pick"), got.count("wrong"), len(got)
-    low, high = wilson_interval(pick, n)
-    text = f"{100 * pick / n:.0f}% [{100 * low:.0f}-{100 * high:.0f}] ({100 * wrong / n:.0f}%)"
-    if name != "IL":
-        keys = [k for k in outcome[name] if k[0] == setting]
-        gain = sum(outcome[name][k] == "pick" != outcome["IL"][k] for k in keys)
-        loss = sum(outcome["IL"][k] == "pick" != outcome[name][k] for k in keys)
-        text += f" +{gain}/-{loss}"
-    return text
-print("| policy | " + " | ".join(SETTINGS) + " | mean Pick |")
-print("|---|" + "---|" * (len(SETTINGS) + 1))
-for name in runs:
-    picks = [o == "pick" for o in outcome[name].values()]
-    print(f"| {name} | " + " | ".join(cell(name, s) for s in SETTINGS) + f" | {100 * sum(picks) / len(picks):.0f}% |")
-PY
+    IL=docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3
+    bboxpick-compare --runs="IL=$IL;BC-FT=docs/offline_rl/test/bc_ft;AWR (T = 0.1)=docs/offline_rl/test/awr_t01;\
+PA-RL=docs/offline_rl/test/parl" --out=docs/offline_rl/test_table.md
 fi
