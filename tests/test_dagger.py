@@ -54,8 +54,8 @@ def env():
     env.close()
 
 
-def _run(env, policy):
-    actor = ExpertTakeover(policy, env, InterventionRule())
+def _run(env, policy, correction="in_place"):
+    actor = ExpertTakeover(policy, env, InterventionRule(), correction)
     errors = []
     result = rollout(actor, "random_id", SEED, env=env, on_step=lambda *a: errors.append(grasp_error(env)))
     return actor, result, np.array(errors)
@@ -84,6 +84,24 @@ def test_a_policy_off_the_grasp_is_taken_over_low_and_the_expert_picks(env, offs
     # The expert grasps aligned: within 2 mm and 1 degree at the grasp.
     at_grasp = errors[heights < 0.012]
     assert np.abs(at_grasp[:, 1]).min() < 0.002 and np.degrees(np.abs(at_grasp[:, 2])).min() < 1.0
+
+
+@pytest.mark.parametrize(
+    ("correction", "highest_m"), [("in_place", (0.0, 0.045)), ("replan", (0.085, 0.095))]
+)
+def test_the_correction_turns_in_place_or_goes_back_above(env, correction, highest_m):
+    actor, result, errors = _run(env, OffsetExpert(env, yaw_deg=30.0), correction)
+    assert actor.reason == "off_yaw" and result["outcome"] == "pick"
+    # Until the grasp closes, the in-place correction stays at the takeover height (< 4 cm above the brick),
+    # the replanned one first climbs back to the pre-grasp height (9 cm).
+    after = errors[actor.takeover_step :, 0]
+    before_grasp = after[: int(np.argmax(after < 0.012))]
+    assert highest_m[0] <= before_grasp.max() <= highest_m[1]
+
+
+def test_an_unknown_correction_names_the_allowed_values():
+    with pytest.raises(ValueError, match="correction='nudge' is not one of in_place, replan"):
+        ExpertTakeover(None, None, InterventionRule(), "nudge")
 
 
 def test_closing_high_and_patience_fire(env):

@@ -20,7 +20,10 @@ if want data; then
         --settings=$SETTINGS --episodes=30 --seed_start=2000 --workers=2
     [[ -d $OUT/demos90 ]] || bboxpick-collect --repo_id=local/demos90 --root=$OUT/demos90 \
         --settings=$SETTINGS --episodes=90 --seed_start=2000 --workers=2
-    [[ -d $OUT/r1 ]] || bboxpick-dagger --policy_path=$CKPT --repo_id=local/r1 --root=$OUT/r1 \
+    [[ -d $OUT/r1 ]] || bboxpick-dagger --policy_path=$CKPT --repo_id=local/r1 --root=$OUT/r1 --correction=replan \
+        --settings=$SETTINGS --episodes=20 --num_inference_steps=4 --workers=2 --merge_with=$OUT/demos30
+    # The same round with the expert correcting in place (turn and shift onto the grasp, then descend).
+    [[ -d $OUT/r1n ]] || bboxpick-dagger --policy_path=$CKPT --repo_id=local/r1n --root=$OUT/r1n --correction=in_place \
         --settings=$SETTINGS --episodes=20 --num_inference_steps=4 --workers=2 --merge_with=$OUT/demos30
 fi
 
@@ -38,14 +41,66 @@ finetune() {  # name, dataset root, extra lerobot-train arguments...
 if want finetune; then
     finetune demos90_ft $OUT/demos90
     finetune dagger_r1_ft $OUT/r1
+    finetune dagger_r1n_ft $OUT/r1n
 fi
 
 # 3. Validation suites beside docs/counterfactual/val_cf/il (same seeds, settings and 4 DDIM steps).
 VAL="--settings=$SETTINGS --episodes=30 --seed_start=5000 --videos=0 --num_inference_steps=4 --workers=2"
 if want val; then
-    for name in ${VAL_POLICIES:-demos90_ft dagger_r1_ft}; do
+    for name in ${VAL_POLICIES:-demos90_ft dagger_r1_ft dagger_r1n_ft}; do
         bboxpick-suite --policies=$name=$OUT/$name/checkpoints/last/pretrained_model $VAL --out_dir=$OUT/val/$name
         mkdir -p docs/dagger/val/$name
         cp $OUT/val/$name/{table.md,table.csv,episodes.jsonl,outcomes.png} docs/dagger/val/$name/
     done
+fi
+
+# 4. Round 2 (replanning corrections): the round-1 policy drives on the next training seeds (4100+), the corrections join round 1's
+#    data (DAgger aggregates), and a fine-tune from the shipped checkpoint on it all, as in step 2.
+R1_POLICY=$OUT/dagger_r1_ft/checkpoints/last/pretrained_model
+if want round2; then
+    [[ -d $OUT/r2 ]] || bboxpick-dagger --policy_path=$R1_POLICY --repo_id=local/r2 --root=$OUT/r2 \
+        --settings=$SETTINGS --episodes=20 --seed_start=4100 --num_inference_steps=4 --workers=2 --merge_with=$OUT/r1 \
+        --correction=replan
+    finetune dagger_r2_ft $OUT/r2
+    VAL_POLICIES=dagger_r2_ft STEP=val bash docs/dagger/run.sh
+fi
+
+# 5. Test seeds, all six settings, beside docs/counterfactual/test_cf/il and il_other3 (the IL rows), and one
+#    table with the paired counts against IL.
+TEST="--settings=grid_id,grid_ood,pile_id,random_id,identical_2,identical_4 --episodes=30 --seed_start=10000 \
+    --videos=0 --num_inference_steps=4 --workers=2"
+if want test; then
+    for name in ${TEST_POLICIES:-demos90_ft dagger_r1_ft}; do
+        bboxpick-suite --policies=$name=$OUT/$name/checkpoints/last/pretrained_model $TEST --out_dir=$OUT/test/$name
+        mkdir -p docs/dagger/test/$name
+        cp $OUT/test/$name/{table.md,table.csv,episodes.jsonl,outcomes.png} docs/dagger/test/$name/
+    done
+fi
+if want test || [[ $STEP == table ]]; then
+    IL=docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3
+    RUNS="IL=$IL;90 expert demos (BC)=docs/dagger/test/demos90_ft;DAgger round 1=docs/dagger/test/dagger_r1_ft"
+    bboxpick-compare --runs="$RUNS" --out=docs/dagger/test_table.md
+fi
+
+# 6. How often the rule took over from a policy that would have picked: the shipped checkpoint alone on round
+#    1's seeds (the same rollouts up to each takeover: same seeds, same policy noise), joined with round 1's records.
+if want rule; then
+    [[ -d $OUT/r1_alone ]] || bboxpick-rollouts --policy_path=$CKPT --repo_id=local/r1_alone --root=$OUT/r1_alone \
+        --settings=$SETTINGS --episodes=31 --seed_start=4000 --num_inference_steps=4 --workers=2
+    python - > docs/dagger/rule_check.md <<'PY'
+import json
+from collections import Counter
+from pathlib import Path
+
+def records(work_dir):
+    return {r["seed"]: r for shard in sorted(Path(work_dir).glob("shard_*")) if not shard.name.endswith(".partial")
+            for r in json.loads((shard / "seeds.json").read_text())}
+dagger, alone = records("outputs/dagger/r1.collect"), records("outputs/dagger/r1_alone.collect")
+rows = Counter((d["reason"] or "no takeover", alone[s]["outcome"]) for s, d in dagger.items() if s in alone)
+outcomes = ["pick", "wrong", "contact", "empty"]
+print("| round 1 (shipped checkpoint, seeds 4000-4092) | " + " | ".join(f"alone: {o}" for o in outcomes) + " |")
+print("|---|" + "---|" * len(outcomes))
+for reason in ["no takeover", "off_yaw", "off_xy", "closing_high", "patience"]:
+    print(f"| {reason} | " + " | ".join(str(rows[reason, o]) for o in outcomes) + " |")
+PY
 fi

@@ -83,6 +83,14 @@ class InterventionRule:
 
 
 REASONS = ("patience", "closing_high", "off_xy", "off_yaw")
+CORRECTIONS = ("in_place", "replan")
+
+
+def check_correction(correction: str) -> str:
+    """``correction`` or a ValueError naming the field and the allowed values."""
+    if correction not in CORRECTIONS:
+        raise ValueError(f"correction={correction!r} is not one of {', '.join(CORRECTIONS)}")
+    return correction
 
 
 def grasp_error(env: Any) -> tuple[float, float, float]:
@@ -106,8 +114,9 @@ class ExpertTakeover:
     """``eval.rollout.rollout``'s runner: the policy until ``rule`` fires, then the scripted expert re-planned
     from that state to the end of the episode."""
 
-    def __init__(self, policy: Any, env: Any, rule: InterventionRule) -> None:
+    def __init__(self, policy: Any, env: Any, rule: InterventionRule, correction: str = "in_place") -> None:
         self.policy, self.env, self.rule = policy, env, rule
+        self.in_place = check_correction(correction) == "in_place"
         self.step = 0
         self.takeover_step: int | None = None
         self.reason: str | None = None
@@ -132,7 +141,7 @@ class ExpertTakeover:
                 from lerobot_bboxpick.sim.expert import ScriptedExpert
 
                 self._expert = ScriptedExpert(np.random.default_rng(self.env.episode_seed))
-                self._expert.reset(self.env)  # plans from the arm's current pose and width
+                self._expert.reset(self.env, in_place=self.in_place)  # from the arm's pose and width
                 self.takeover_step, self.reason = self.step, reason
         self.step += 1
         return self._expert.act() if self._expert is not None else action
@@ -143,6 +152,7 @@ class DaggerRecorder(PolicyRecorder):
     """A policy rollout with the expert taking over by ``rule``; records the correction only."""
 
     rule: InterventionRule = InterventionRule()
+    correction: str = "in_place"
 
     def __call__(self, env: Any, seed: int) -> tuple[list[dict], str, dict]:
         """The correction frames of ``seed`` (none when the policy needed no help), the episode's outcome,
@@ -154,7 +164,7 @@ class DaggerRecorder(PolicyRecorder):
 
         torch.set_num_threads(self.threads)
         policy = load_runner(self.policy_path, self.n_action_steps, env, self.num_inference_steps)
-        actor = ExpertTakeover(policy, env, self.rule)
+        actor = ExpertTakeover(policy, env, self.rule, self.correction)
         frames: list[dict] = []
 
         def keep(obs: dict, info: dict, action: np.ndarray, reward: float, next_info: dict) -> None:
@@ -174,6 +184,13 @@ class DaggerConfig(RolloutsConfig):
 
     seed_start: int = DEFAULT_SEED_START
     rule: InterventionRule = dataclasses.field(default_factory=InterventionRule)
+    # How the expert corrects: "in_place" turns and shifts onto the grasp from where the arm is, then
+    # descends (a person's nudge); "replan" goes back above the brick first (the teleoperator's plan).
+    correction: str = "in_place"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_correction(self.correction)
 
     def collect_config(self) -> CollectConfig:
         """Training seeds until ``episodes`` x settings corrections that end in a pick are kept."""
@@ -199,7 +216,7 @@ def summarize(records: list[dict]) -> dict:
 def record_corrections(cfg: DaggerConfig) -> dict:
     """Run (or resume) the round and aggregate its corrections (after ``merge_with``) into ``cfg.root``."""
     collect_cfg = cfg.collect_config()
-    recorder = policy_recorder(cfg, DaggerRecorder, rule=cfg.rule)
+    recorder = policy_recorder(cfg, DaggerRecorder, rule=cfg.rule, correction=cfg.correction)
     merge_with = [cfg.merge_with] if cfg.merge_with is not None else []
     summary = collect(collect_cfg, recorder=recorder, merge_with=merge_with)
     summary["dagger"] = summarize(attempted(collect_cfg.work_dir))

@@ -205,7 +205,9 @@ def policy_recorder(
         n_action_steps=cfg.n_action_steps,
         num_inference_steps=cfg.num_inference_steps,
     )
-    key = run_key(suite, path) | {k: dataclasses.asdict(v) for k, v in options.items()}
+    key = run_key(suite, path) | {
+        k: dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v for k, v in options.items()
+    }
     return recorder_class(
         policy_path=path,
         max_steps=cfg.max_steps,

@@ -57,32 +57,51 @@ class ScriptedExpert:
         self._actions: np.ndarray | None = None
         self._i = 0
 
-    def plan(self, env: LegoPickEnv, brick: int | None = None) -> np.ndarray:
-        """Action sequence (N, 10) for picking ``brick`` (default: the target) from the current state."""
+    def plan(self, env: LegoPickEnv, brick: int | None = None, in_place: bool = False) -> np.ndarray:
+        """Action sequence (N, 10) for picking ``brick`` (default: the target) from the current state.
+
+        ``in_place``: a correction of an arm already near the brick (DAgger): turn and shift onto the grasp
+        at the current height (at least 1.5 cm above the grasp, gripper opening), then descend; instead of
+        going back above the brick first. Either way the episode's rng draws are the same.
+        """
         brick = env.target if brick is None else brick
         rng = self.rng
         speed = rng.uniform(0.85, 1.2) if self.vary else 1.0
         offset = rng.uniform(-0.01, 0.01, size=2) if self.vary else np.zeros(2)
         B = env.brick_pose(brick)
         brick_yaw = float(np.arctan2(B[1, 0], B[0, 0]))
-        R_grasp = grasp_rotation(brick_yaw)
-        p = B[:3, 3]
         T0 = env.tcp_pose()
+        current_yaw = float(np.arctan2(*(T0[:3, :3] @ _TOP_DOWN.T)[[1, 0], 0]))
+        R_grasp = grasp_rotation(brick_yaw, current_yaw if in_place else 0.0)
+        p = B[:3, 3]
 
         def pose(xyz: np.ndarray, R: np.ndarray) -> np.ndarray:
             T = np.eye(4)
             T[:3, :3], T[:3, 3] = R, xyz
             return T
 
-        above = np.array([p[0] + offset[0], p[1] + offset[1], p[2] + PREGRASP_HEIGHT])
+        grasp = pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp)
+        if in_place:
+            height = max(float(T0[2, 3] - p[2]), GRASP_HEIGHT + 0.015)
+            approach = [
+                Waypoint(pose(np.array([p[0], p[1], p[2] + height]), R_grasp), OPEN_WIDTH, 0.8 / speed),
+                Waypoint(grasp, OPEN_WIDTH, (0.4 + 8 * (height - GRASP_HEIGHT)) / speed),
+            ]
+        else:
+            above = np.array([p[0] + offset[0], p[1] + offset[1], p[2] + PREGRASP_HEIGHT])
+            approach = [
+                Waypoint(pose(above, R_grasp), OPEN_WIDTH, 2.2 / speed),
+                Waypoint(
+                    pose(np.array([p[0], p[1], p[2] + PREGRASP_HEIGHT * 0.5]), R_grasp),
+                    OPEN_WIDTH,
+                    0.6 / speed,
+                ),
+                Waypoint(grasp, OPEN_WIDTH, 0.9 / speed),
+            ]
         waypoints = [
-            Waypoint(pose(above, R_grasp), OPEN_WIDTH, 2.2 / speed),
-            Waypoint(
-                pose(np.array([p[0], p[1], p[2] + PREGRASP_HEIGHT * 0.5]), R_grasp), OPEN_WIDTH, 0.6 / speed
-            ),
-            Waypoint(pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp), OPEN_WIDTH, 0.9 / speed),
-            Waypoint(pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp), CLOSED_WIDTH, 0.6),
-            Waypoint(pose(np.array([p[0], p[1], p[2] + GRASP_HEIGHT]), R_grasp), CLOSED_WIDTH, 0.25),
+            *approach,
+            Waypoint(grasp, CLOSED_WIDTH, 0.6),
+            Waypoint(grasp, CLOSED_WIDTH, 0.25),
             Waypoint(pose(np.array([p[0], p[1], LIFT_HEIGHT]), R_grasp), CLOSED_WIDTH, 1.2 / speed),
             Waypoint(T0, CLOSED_WIDTH, 2.2 / speed),
         ]
@@ -106,9 +125,9 @@ class ScriptedExpert:
             T_prev, w_prev = wp.T, wp.width
         return np.concatenate(actions).astype(np.float32)
 
-    def reset(self, env: LegoPickEnv, brick: int | None = None) -> None:
-        """Plan the episode from the env's current (just reset) state."""
-        self._actions = self.plan(env, brick)
+    def reset(self, env: LegoPickEnv, brick: int | None = None, in_place: bool = False) -> None:
+        """Plan the episode from the env's current (just reset) state (``plan``)."""
+        self._actions = self.plan(env, brick, in_place)
         self._i = 0
 
     @property
