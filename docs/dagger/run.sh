@@ -53,6 +53,11 @@ if want val; then
         cp $OUT/val/$name/{table.md,table.csv,episodes.jsonl,outcomes.png} docs/dagger/val/$name/
     done
 fi
+if [[ $STEP == val_table ]]; then  # after val and round2
+    bboxpick-compare --runs="IL=docs/counterfactual/val_cf/il;BC, 30 + 60 new demos=docs/dagger/val/demos90_ft;\
+DAgger r1, replan=docs/dagger/val/dagger_r1_ft;DAgger r1, in place=docs/dagger/val/dagger_r1n_ft;\
+DAgger r2, replan=docs/dagger/val/dagger_r2_ft" --out=docs/dagger/val_table.md
+fi
 
 # 4. Round 2 (replanning corrections): the round-1 policy drives on the next training seeds (4100+), the corrections join round 1's
 #    data (DAgger aggregates), and a fine-tune from the shipped checkpoint on it all, as in step 2.
@@ -70,7 +75,7 @@ fi
 TEST="--settings=grid_id,grid_ood,pile_id,random_id,identical_2,identical_4 --episodes=30 --seed_start=10000 \
     --videos=0 --num_inference_steps=4 --workers=2"
 if want test; then
-    for name in ${TEST_POLICIES:-demos90_ft dagger_r1_ft}; do
+    for name in ${TEST_POLICIES:-dagger_r1n_ft}; do  # the validation's choice (the controls: not run on test yet)
         bboxpick-suite --policies=$name=$OUT/$name/checkpoints/last/pretrained_model $TEST --out_dir=$OUT/test/$name
         mkdir -p docs/dagger/test/$name
         cp $OUT/test/$name/{table.md,table.csv,episodes.jsonl,outcomes.png} docs/dagger/test/$name/
@@ -78,7 +83,7 @@ if want test; then
 fi
 if want test || [[ $STEP == table ]]; then
     IL=docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3
-    RUNS="IL=$IL;90 expert demos (BC)=docs/dagger/test/demos90_ft;DAgger round 1=docs/dagger/test/dagger_r1_ft"
+    RUNS="IL=$IL;DAgger r1, in place=docs/dagger/test/dagger_r1n_ft"
     bboxpick-compare --runs="$RUNS" --out=docs/dagger/test_table.md
 fi
 
