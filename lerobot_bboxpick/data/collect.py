@@ -43,6 +43,7 @@ from lerobot_bboxpick.data.features import (
 from lerobot_bboxpick.parallel import check_ray, worker_pool
 from lerobot_bboxpick.quiet import native_output_to, quiet_libraries, redirect_native_output
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
+from lerobot_bboxpick.sim.outcome import OUTCOMES
 
 SHARD_SIZE = 5
 log = logging.getLogger(__name__)
@@ -381,7 +382,7 @@ def collect(
     cfg.log_file.parent.mkdir(parents=True, exist_ok=True)
     with native_output_to(cfg.log_file):  # LeRobot's copy bars, FFmpeg's muxer lines
         total = aggregate(cfg, merge_with)
-    outcomes = {o: sum(r["outcome"] == o for r in records) for o in ("pick", "wrong", "contact", "empty")}
+    outcomes = {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
     summary = {"root": str(cfg.root), "episodes": total, "attempted": len(records), "outcomes": outcomes}
     if cfg.push_to_hub:
         from lerobot.datasets.lerobot_dataset import LeRobotDataset

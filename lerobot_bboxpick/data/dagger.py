@@ -34,6 +34,7 @@ import numpy as np
 
 from lerobot_bboxpick.data.collect import CollectConfig, attempted, close_episode, collect, step_frame
 from lerobot_bboxpick.data.rollouts import PolicyRecorder, RolloutsConfig, policy_recorder
+from lerobot_bboxpick.sim.outcome import OUTCOMES
 
 DEFAULT_SEED_START = 4000  # training seeds no other recipe of the project draws from
 log = logging.getLogger(__name__)
@@ -97,16 +98,14 @@ def grasp_error(env: Any) -> tuple[float, float, float]:
     """The TCP's height above the target's bottom face, its horizontal distance from the target (m), and
     its yaw error to the nearest grasp yaw (rad, in [-pi/4, pi/4]: a square brick grasps alike every
     quarter turn)."""
-    from lerobot_bboxpick.sim.expert import grasp_rotation
+    from lerobot_bboxpick.sim.expert import tcp_yaw
 
     tcp, brick = env.tcp_pose(), env.brick_pose(env.target)
     height = float(tcp[2, 3] - brick[2, 3])
     xy = float(np.linalg.norm(tcp[:2, 3] - brick[:2, 3]))
-    z_turn = tcp[:3, :3] @ grasp_rotation(0.0).T  # the TCP's rotation about z from the top-down grasp
-    tcp_yaw = np.arctan2(z_turn[1, 0], z_turn[0, 0])
     brick_yaw = np.arctan2(brick[1, 0], brick[0, 0])
     quarter = np.pi / 2
-    yaw = float((tcp_yaw - brick_yaw + quarter / 2) % quarter - quarter / 2)
+    yaw = float((tcp_yaw(tcp) - brick_yaw + quarter / 2) % quarter - quarter / 2)
     return height, xy, yaw
 
 
@@ -203,8 +202,7 @@ def summarize(records: list[dict]) -> dict:
     return {
         "rollouts": len(records),
         "policy_alone": {
-            o: sum(r["outcome"] == o for r in records if r.get("takeover_step") is None)
-            for o in ("pick", "wrong", "contact", "empty")
+            o: sum(r["outcome"] == o for r in records if r.get("takeover_step") is None) for o in OUTCOMES
         },
         "takeovers": {reason: sum(r["reason"] == reason for r in takeovers) for reason in REASONS},
         "mean_takeover_step": float(np.mean([r["takeover_step"] for r in takeovers])) if takeovers else None,

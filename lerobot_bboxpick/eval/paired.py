@@ -12,14 +12,13 @@ moved. The last column pools every setting and gives the two-sided sign test of 
 losses (ties, scenes both pick or both miss, carry no information).
 """
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import draccus
 from scipy.stats import binomtest
 
-from lerobot_bboxpick.eval.suite import wilson_interval
+from lerobot_bboxpick.eval.suite import read_episodes, wilson_interval
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
 Scene = tuple[str, int]  # (setting, seed)
@@ -33,8 +32,7 @@ def load_outcomes(folders: list[Path]) -> dict[Scene, str]:
         path = Path(folder) / "episodes.jsonl"
         if not path.is_file():
             raise ValueError(f"runs: {folder} has no episodes.jsonl (a bboxpick-suite --out_dir)")
-        for line in path.read_text().splitlines():
-            episode = json.loads(line)
+        for episode in read_episodes(path):
             scene = (episode["setting"], int(episode["seed"]))
             if scene in outcomes:
                 raise ValueError(f"runs: scene {scene} appears twice in {', '.join(map(str, folders))}")

@@ -37,6 +37,12 @@ class Waypoint:
     duration: float
 
 
+def tcp_yaw(T: np.ndarray) -> float:
+    """The yaw (rad) of a TCP pose ``T`` (4x4): its rotation about the vertical from the top-down pose."""
+    z_turn = T[:3, :3] @ _TOP_DOWN.T
+    return float(np.arctan2(z_turn[1, 0], z_turn[0, 0]))
+
+
 def grasp_rotation(brick_yaw: float, current_yaw: float = 0.0) -> np.ndarray:
     """Top-down TCP rotation with the finger axis along one of the brick's faces.
 
@@ -71,8 +77,7 @@ class ScriptedExpert:
         B = env.brick_pose(brick)
         brick_yaw = float(np.arctan2(B[1, 0], B[0, 0]))
         T0 = env.tcp_pose()
-        current_yaw = float(np.arctan2(*(T0[:3, :3] @ _TOP_DOWN.T)[[1, 0], 0]))
-        R_grasp = grasp_rotation(brick_yaw, current_yaw if in_place else 0.0)
+        R_grasp = grasp_rotation(brick_yaw, tcp_yaw(T0) if in_place else 0.0)
         p = B[:3, 3]
 
         def pose(xyz: np.ndarray, R: np.ndarray) -> np.ndarray:
