@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from lerobot_bboxpick import geometry
+from lerobot_bboxpick.rl.branch_demos import success_branches
 from lerobot_bboxpick.rl.chunk_perturbations import Perturbation, cosine_ramp, parse_perturbations
 from lerobot_bboxpick.rl.counterfactual_dataset import (
     CounterfactualConfig,
@@ -132,6 +133,25 @@ def test_same_options_same_dataset_and_true_labels(tmp_path):
     assert (a.outcome[0] == OUTCOMES.index("pick")).any()
     assert "| expert |" in (tmp_path / "a" / "summary.md").read_text()
     _check_success_demos(b, tmp_path / "b" / "success_demos", n_exec=12)
+    _check_branch_advantages(b, tmp_path / "b", tmp_path / "advantages.json")
+
+
+def _check_branch_advantages(points, out_dir: Path, path: Path) -> None:
+    """bboxpick-branch-advantages on the real success demos: each episode's advantage is its branch's
+    return minus the mean return of the policy's own draws (policy, sample1) at its point."""
+    from lerobot_bboxpick.rl.branch_advantages import (
+        BranchAdvantagesConfig,
+        load_advantages,
+        write_advantages,
+    )
+
+    write_advantages(
+        BranchAdvantagesConfig(data_dir=out_dir, dataset_root=out_dir / "success_demos", out=path)
+    )
+    got = load_advantages(path)
+    picks = success_branches(points)
+    expected = [points.ret[p, c] - points.ret[p, :2].mean() for p, c in picks]
+    assert got == pytest.approx(expected, abs=1e-5)
 
 
 def _check_success_demos(points, root: Path, n_exec: int) -> None:
@@ -141,6 +161,7 @@ def _check_success_demos(points, root: Path, n_exec: int) -> None:
 
     picks = [(p, c) for p in range(len(points)) for c in range(len(points.kinds))]
     picks = [(p, c) for p, c in picks if points.outcome[p, c] == OUTCOMES.index("pick")]
+    assert success_branches(points) == picks
     assert picks, "no branch picked: nothing to check"
     demos = LeRobotDataset("local/counterfactual_successes", root=root)
     assert demos.meta.total_episodes == len(picks)

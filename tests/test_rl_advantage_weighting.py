@@ -162,3 +162,33 @@ def test_bad_options_and_mismatched_critics_name_the_field(tmp_path):
         dataclasses.replace(policy.config, awr_critic_path=str(critic_dir))
     )
     assert loaded.critic is not None and loaded.reference is None
+
+
+def test_measured_episode_advantages_weight_like_a_critic():
+    """Episode 0 holds the +x chunks, episode 1 the -x ones: advantages +4 / -4 by episode give the loss of
+    the critic that says the same (which the test above trains to the +x chunk)."""
+    policy = tiny_policy(seed=0).train()
+    batch = two_chunk_batch()
+    batch["episode_index"] = torch.tensor([0, 1]).repeat(4)
+    measured = AdvantageWeightedLoss(
+        None, None, temperature=1.0, episode_advantages=torch.tensor([4.0, -4.0])
+    )
+    critic = AdvantageWeightedLoss(LastXCritic(), None, temperature=1.0)
+    assert torch.allclose(measured.advantages(policy.model, batch), critic.advantages(policy.model, batch))
+    torch.manual_seed(0)
+    loss, info = measured(policy.model, batch)
+    torch.manual_seed(0)
+    expected, expected_info = critic(policy.model, batch)
+    assert loss.item() == pytest.approx(expected.item(), rel=1e-6)
+    assert info["awr_weight"] == pytest.approx((20.0 + math.exp(-4.0)) / 2, rel=1e-4)
+    assert info == pytest.approx(expected_info, abs=1e-5)
+    batch["episode_index"] = torch.tensor([0, 2]).repeat(4)
+    with pytest.raises(ValueError, match="advantages for 2 episodes; the batch holds episode 2"):
+        measured(policy.model, batch)
+
+
+def test_a_critic_and_measured_advantages_are_exclusive():
+    with pytest.raises(ValueError, match="awr_critic_path and awr_advantages_path are both set"):
+        BboxDiffusionConfig(awr_critic_path="c", awr_advantages_path="a.json")
+    with pytest.raises(ValueError, match="not both"):
+        AdvantageWeightedLoss(LastXCritic(), None, episode_advantages=torch.zeros(2))

@@ -8,6 +8,10 @@ BC reference policy. Here it is a loss of the ``bbox_diffusion`` policy, switche
 training loop, optimiser, checkpoints and logs. The critic and the reference are frozen and live
 outside the policy's modules: they are not saved with the fine-tuned checkpoint.
 
+Instead of a critic, ``awr_advantages_path`` gives each training episode a measured advantage
+(``rl.branch_advantages``: counterfactual successes' Monte-Carlo ``G - V``), looked up by the batch's
+``episode_index``.
+
 Weights are clipped at ``awr_max_weight`` (AWR's usual guard against a few chunks taking the whole
 batch); the logged ``awr_clipped`` fraction says how often it binds.
 """
@@ -40,10 +44,15 @@ class AdvantageWeightedLoss:
         max_weight: float = 20.0,
         bc_weight: float = 1.0,
         anchor_weight: float = 0.5,
+        episode_advantages: Tensor | None = None,
     ) -> None:
         """``critic``: any object with ``encode(observations)``, ``q(state, relative_chunk)`` and ``v(state)``
-        (an ``IqlCriticModel``); ``reference``: a model of the trained policy's architecture."""
+        (an ``IqlCriticModel``); ``reference``: a model of the trained policy's architecture;
+        ``episode_advantages``: (episodes,) advantages by episode index, used instead of a critic."""
+        if critic is not None and episode_advantages is not None:
+            raise ValueError("give a critic or episode advantages, not both")
         self.critic = critic.eval().requires_grad_(False) if critic is not None else None
+        self.episode_advantages = episode_advantages
         if reference is not None:
             # Train mode: its augmentation must replay the trained model's random crop (see
             # ``BboxDiffusionModel.denoising_terms``); no gradient ever reaches it.
@@ -57,9 +66,13 @@ class AdvantageWeightedLoss:
     @classmethod
     def from_config(cls, config: BboxDiffusionConfig) -> AdvantageWeightedLoss | None:
         """The objective the config asks for, loading its critic and reference; None when neither is set."""
-        if config.awr_critic_path is None and config.anchor_policy_path is None:
+        if not (config.awr_critic_path or config.awr_advantages_path or config.anchor_policy_path):
             return None
-        critic = reference = None
+        critic = reference = episode_advantages = None
+        if config.awr_advantages_path is not None:
+            from lerobot_bboxpick.rl.branch_advantages import load_advantages
+
+            episode_advantages = torch.from_numpy(load_advantages(config.awr_advantages_path))
         if config.awr_critic_path is not None:
             critic = IqlCriticModel.from_pretrained(_existing(config.awr_critic_path, "awr_critic_path"))
             _check_matches(critic.encoder.config, config, "awr_critic_path", ("horizon", "n_obs_steps"))
@@ -75,11 +88,15 @@ class AdvantageWeightedLoss:
             max_weight=config.awr_max_weight,
             bc_weight=config.awr_bc_weight,
             anchor_weight=config.anchor_weight,
+            episode_advantages=episode_advantages,
         )
 
     @torch.no_grad()
     def advantages(self, model: BboxDiffusionModel, batch: dict[str, Tensor]) -> Tensor:
-        """``Q(s, a) - V(s)`` (B,) of the batch's chunks under the frozen critic."""
+        """``Q(s, a) - V(s)`` (B,) of the batch's chunks under the frozen critic, or their episodes'
+        measured advantages."""
+        if self.episode_advantages is not None:
+            return self._episode_lookup(batch)
         images, states, bboxes = model._inputs(batch)
         observations = {model.config.image_key: images, STATE: states}
         if bboxes is not None:
@@ -87,6 +104,18 @@ class AdvantageWeightedLoss:
         features = self.critic.encode(observations)
         relative = relative_pose10_torch(batch[ACTION].float(), states[:, -1].float())
         return self.critic.q(features, relative) - self.critic.v(features)
+
+    def _episode_lookup(self, batch: dict[str, Tensor]) -> Tensor:
+        if "episode_index" not in batch:
+            raise KeyError("awr_advantages_path needs the batch's episode_index (a LeRobotDataset batch)")
+        index = torch.as_tensor(batch["episode_index"]).long().reshape(-1).cpu()
+        table = self.episode_advantages
+        if int(index.max()) >= len(table) or int(index.min()) < 0:
+            raise ValueError(
+                f"awr_advantages_path has advantages for {len(table)} episodes; the batch holds episode "
+                f"{int(index.max())}: it was written for another dataset (bboxpick-branch-advantages)"
+            )
+        return table[index].to(batch[ACTION].device)
 
     def weights(self, advantages: Tensor) -> Tensor:
         """``min(exp(A / temperature), max_weight)``."""
@@ -100,7 +129,7 @@ class AdvantageWeightedLoss:
                 frozen.to(device)
         terms = model.denoising_terms(batch, reference=self.reference)
         info = {"diffusion_loss": terms.loss.mean().item()}
-        if self.critic is not None:
+        if self.critic is not None or self.episode_advantages is not None:
             advantages = self.advantages(model, batch)
             weights = self.weights(advantages)
             info |= {

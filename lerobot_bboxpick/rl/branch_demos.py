@@ -92,17 +92,28 @@ class SuccessDemos:
         return native_output_to(self.root.parent / "encoder.log")
 
 
-def aggregate_success_demos(out_dir: Path, episode_names: list[str]) -> Path | None:
-    """Merge the per-episode parts named ``episode_names`` (in that order; those without successes have no
-    part) into ``out_dir/success_demos``; returns its path, or None if no branch picked."""
+def aggregate_success_demos(out_dir: Path) -> Path | None:
+    """Merge every episode's part in ``out_dir`` (sorted by episode name, the order ``load_points`` reads
+    branch points in; those without successes have no part) into ``out_dir/success_demos``; returns its
+    path, or None if no branch picked. A resumed run that adds episodes rebuilds it from all of them."""
     from lerobot_bboxpick.data.collect import aggregate_roots
     from lerobot_bboxpick.quiet import native_output_to, quiet_libraries
 
-    parts = [out_dir / PARTS_DIR / n for n in episode_names if (out_dir / PARTS_DIR / n / "meta").is_dir()]
+    parts = sorted(p.parent for p in (Path(out_dir) / PARTS_DIR).glob("*/meta"))
     if not parts:
         return None
-    dest = out_dir / DEMOS_DIR
+    dest = Path(out_dir) / DEMOS_DIR
     quiet_libraries()
-    with native_output_to(out_dir / "aggregate.log"):  # LeRobot's copy bars, FFmpeg's muxer lines
+    with native_output_to(Path(out_dir) / "aggregate.log"):  # LeRobot's copy bars, FFmpeg's muxer lines
         aggregate_roots(REPO_ID, parts, dest)
     return dest
+
+
+def success_branches(points: Any) -> list[tuple[int, int]]:
+    """``(point row, candidate)`` of every picking branch of ``points`` (a ``CounterfactualPoints`` of the
+    same folder), in the order of ``success_demos``'s episodes: by episode name, point, then candidate."""
+    from lerobot_bboxpick.sim.outcome import OUTCOMES
+
+    pick = OUTCOMES.index("pick")
+    rows, cols = np.nonzero(points.outcome == pick)  # row-major: point, then candidate
+    return list(zip(rows.tolist(), cols.tolist(), strict=True))

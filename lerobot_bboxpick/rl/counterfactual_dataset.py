@@ -436,11 +436,10 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
 
     _prepare(cfg)
     threads = max(1, (mp.cpu_count() or 1) // cfg.workers)
-    tasks, names = [], []
+    tasks = []
     for setting in cfg.setting_list:
         for k in range(cfg.episodes):
             name = f"{setting}_seed{cfg.seed_start + k}"
-            names.append(name)
             path = cfg.out_dir / POINTS_DIR / f"{name}.npz"
             if not path.is_file():
                 tasks.append(
@@ -470,7 +469,7 @@ def run_counterfactual(cfg: CounterfactualConfig) -> Path:
     summary = cfg.out_dir / "summary.md"
     summary.write_text(summary_table(load_points(cfg.out_dir)))
     if cfg.success_demos:
-        demos = aggregate_success_demos(cfg.out_dir, names)
+        demos = aggregate_success_demos(cfg.out_dir)
         log.info("picking branches as episodes: %s", demos or "none (no branch picked)")
     return summary
 

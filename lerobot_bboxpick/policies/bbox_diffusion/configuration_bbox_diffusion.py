@@ -126,7 +126,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # from this policy); ``awr_bc_weight`` adds the unweighted loss, and ``anchor_weight`` an MSE between
     # this model's denoised prediction and the frozen reference policy's at ``anchor_policy_path`` (same
     # noisy chunk, timestep and augmented observation): the paper's stabilisers. Training only.
+    # ``awr_advantages_path`` instead of a critic: measured advantages per training episode (a
+    # ``bboxpick-branch-advantages`` file: counterfactual successes' G - V from the simulator).
     awr_critic_path: str | None = None
+    awr_advantages_path: str | None = None
     awr_temperature: float = 1.0
     awr_max_weight: float = 20.0
     awr_bc_weight: float = 1.0
@@ -173,6 +176,11 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"awr_temperature={self.awr_temperature!r} must be > 0")
         if not self.awr_max_weight >= 1.0:
             raise ValueError(f"awr_max_weight={self.awr_max_weight!r} must be >= 1")
+        if self.awr_critic_path is not None and self.awr_advantages_path is not None:
+            raise ValueError(
+                "awr_critic_path and awr_advantages_path are both set: weight by a critic or by measured "
+                "advantages, not both"
+            )
         for name in ("awr_bc_weight", "anchor_weight"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")

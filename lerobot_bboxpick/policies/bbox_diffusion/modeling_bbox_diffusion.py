@@ -330,7 +330,8 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
         """Training loss: the denoising loss, or the advantage-weighted objective when the config names a
-        critic or a reference policy (``awr_critic_path`` / ``anchor_policy_path``), on the batch's action
+        critic, measured advantages or a reference policy (``awr_critic_path`` / ``awr_advantages_path`` /
+        ``anchor_policy_path``), on the batch's action
         chunks or, where a PA-RL cache (``parl_cache_path``) holds a valid entry, on its optimised ones."""
         if self._relabels is None and self.config.parl_cache_path:
             from lerobot_bboxpick.rl.pa_rl import RelabelCache  # rl imports us
@@ -338,7 +339,12 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
             self._relabels = RelabelCache.load(self.config.parl_cache_path)
         if self._relabels is not None:
             batch = self._relabels.apply(batch)
-        if self._fine_tuning is None and (self.config.awr_critic_path or self.config.anchor_policy_path):
+        fine_tune = (
+            self.config.awr_critic_path,
+            self.config.awr_advantages_path,
+            self.config.anchor_policy_path,
+        )
+        if self._fine_tuning is None and any(fine_tune):
             from lerobot_bboxpick.rl.advantage_weighting import AdvantageWeightedLoss  # rl imports us
 
             self._fine_tuning = AdvantageWeightedLoss.from_config(self.config)
