@@ -66,7 +66,7 @@ class AdvantageWeightedLoss:
     @classmethod
     def from_config(cls, config: BboxDiffusionConfig) -> AdvantageWeightedLoss | None:
         """The objective the config asks for, loading its critic and reference; None when neither is set."""
-        if not (config.awr_critic_path or config.awr_advantages_path or config.anchor_policy_path):
+        if not config.advantage_weighted:
             return None
         critic = reference = episode_advantages = None
         if config.awr_advantages_path is not None:

@@ -222,6 +222,12 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError("bbox_diffusion needs an action of shape (10,) (TCP pose10)")
 
     @property
+    def advantage_weighted(self) -> bool:
+        """Whether training uses the advantage-weighted objective (``rl.advantage_weighting``): a critic,
+        measured advantages or a reference policy is named."""
+        return bool(self.awr_critic_path or self.awr_advantages_path or self.anchor_policy_path)
+
+    @property
     def bbox_feature_key(self) -> str:
         """Name of the bbox observation."""
         return BBOX

@@ -339,12 +339,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
             self._relabels = RelabelCache.load(self.config.parl_cache_path)
         if self._relabels is not None:
             batch = self._relabels.apply(batch)
-        fine_tune = (
-            self.config.awr_critic_path,
-            self.config.awr_advantages_path,
-            self.config.anchor_policy_path,
-        )
-        if self._fine_tuning is None and any(fine_tune):
+        if self._fine_tuning is None and self.config.advantage_weighted:
             from lerobot_bboxpick.rl.advantage_weighting import AdvantageWeightedLoss  # rl imports us
 
             self._fine_tuning = AdvantageWeightedLoss.from_config(self.config)
