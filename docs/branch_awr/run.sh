@@ -49,14 +49,14 @@ finetune() {  # name, extra lerobot-train arguments...
 }
 if want finetune; then
     mkdir -p $OUT
+    AWR_T01=(--policy.awr_advantages_path=$OUT/advantages.json --policy.awr_temperature=0.1
+        --policy.anchor_policy_path=$CKPT)
     for name in ${FINETUNES:-succ_bc awr_t01}; do
         case $name in
             succ_bc) finetune succ_bc ;;  # the honest baseline: demos + successes, plain BC
-            awr_t01) finetune awr_t01 --policy.awr_advantages_path=$OUT/advantages.json \
-                --policy.awr_temperature=0.1 --policy.anchor_policy_path=$CKPT ;;
+            awr_t01) finetune awr_t01 "${AWR_T01[@]}" ;;
             # a second training seed of the chosen method (lerobot-train's default is 1000)
-            awr_t01_s1) finetune awr_t01_s1 --policy.awr_advantages_path=$OUT/advantages.json \
-                --policy.awr_temperature=0.1 --policy.anchor_policy_path=$CKPT --seed=1 ;;
+            awr_t01_s1) finetune awr_t01_s1 "${AWR_T01[@]}" --seed=1 ;;
             succ_bc_s1) finetune succ_bc_s1 --seed=1 ;;
             awr_t003) finetune awr_t003 --policy.awr_advantages_path=$OUT/advantages.json \
                 --policy.awr_temperature=0.03 --policy.anchor_policy_path=$CKPT ;;
