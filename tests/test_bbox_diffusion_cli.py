@@ -214,3 +214,39 @@ def _episode_rows(root: Path) -> list[list[int]]:
     hf = LeRobotDataset("test/bd", root=root).hf_dataset.select_columns(["episode_index"])
     episodes = np.asarray(hf.with_format("numpy")[:]["episode_index"]).reshape(-1)
     return [np.flatnonzero(episodes == ep).tolist() for ep in np.unique(episodes)]
+
+
+@pytest.mark.slow
+def test_train_saves_the_target_view_and_the_loaded_policy_samples_with_it(dataset, tmp_path):
+    """``--policy.target_crop_size`` through lerobot-train: the checkpoint holds the view's trained
+    encoder, the loaded policy uses those weights, and its view sees pixels inside the target's window
+    only."""
+    import torch
+    from safetensors.torch import load_file
+
+    from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+
+    view_args = ["--policy.n_obs_steps=1", "--policy.target_crop_size=32"]
+    path = train_two_steps([*TINY, *view_args], dataset, tmp_path / "train")
+    saved = load_file(path / "model.safetensors")
+    view_keys = [k for k in saved if k.startswith("ema_model.target_view.encoder.")]
+    assert len(view_keys) > 10
+    policy = BboxDiffusionPolicy.from_pretrained(path).eval()
+    assert policy.config.target_crop_size == 32
+    loaded = policy.state_dict()
+    assert all(torch.equal(loaded[k], saved[k]) for k in view_keys)
+    model = policy._inference_model()
+    g = torch.Generator().manual_seed(0)
+    images = torch.rand(1, 1, 3, 224, 224, generator=g)
+    boxes = torch.tensor([0.45, 0.45, 0.5, 0.5]).expand(1, 1, 4)  # window: 33.6 px around (106, 106)
+    near, far = images.clone(), images.clone()
+    near[..., 100:112, 100:112] = 1.0
+    far[..., 180:200, 180:200] = 1.0
+    with torch.no_grad():
+        ref = model.target_view(images, boxes)
+        assert (model.target_view(near, boxes) - ref).abs().max() > 1e-4
+        assert torch.equal(model.target_view(far, boxes), ref)
+    state = torch.tensor([[0.5, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.08]])
+    observation = {"observation.state": state[:, None], "observation.bbox": boxes}
+    chunk = policy.predict_action_chunk({"observation.images.wrist": images, **observation})
+    assert torch.isfinite(chunk).all() and chunk.shape == (1, policy.config.horizon, 10)

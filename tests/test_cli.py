@@ -28,6 +28,23 @@ def test_demo_writes_video_sheet_and_table(tmp_path):
     assert sheet.shape == (448, 3 * 448, 3)
 
 
+def test_inputs_sheet_shows_the_target_magnified_in_the_target_view(tmp_path):
+    """``sheet --inputs``: per setting, the frame, the 64 px policy image and the 48 px target view. The
+    view's centre quarter is mostly brick (saturated pixels) in every setting; the same region of the
+    frame and of the policy image is mostly table."""
+    out = tmp_path / "inputs.png"
+    assert main(["sheet", "--inputs", "--out", str(out)]) == 0
+    sheet = cv2.imread(str(out))
+    assert sheet.shape == (6 * 224, 3 * 224, 3)
+    saturated = cv2.cvtColor(sheet, cv2.COLOR_BGR2HSV)[..., 1] > 0.6 * 255
+    for row in range(6):
+        centres = [
+            saturated[row * 224 + 84 : row * 224 + 140, col * 224 + 84 : col * 224 + 140] for col in range(3)
+        ]
+        frame, policy_image, view = (c.mean() for c in centres)
+        assert view > 0.5 and frame < 0.2 and policy_image < 0.2, (row, frame, policy_image, view)
+
+
 @pytest.mark.slow
 def test_unknown_setting_is_refused_with_the_valid_list():
     result = subprocess.run(

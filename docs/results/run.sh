@@ -133,33 +133,56 @@ fi
 # of 8 instead of 32 (more updates in the same minutes; the quick profile's finding), float32, then
 # validation seeds 5000-5029 of every setting at 4 DDIM steps beside the shipped checkpoint; test seeds
 # 10000-10029 likewise (the shipped checkpoint's 4-step test rows are docs/counterfactual's).
-if want practical_b8; then
-  X=outputs/exp
-  B8_STEPS=${B8_STEPS:-12000}
+X=outputs/exp
+VAL_SHIPPED="docs/counterfactual/val_cf/il,docs/results/validation_shipped_other3"
+TEST_SHIPPED="docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3"
+practical_data() {
   bboxpick-collect --repo_id=local/lego_pick_practical --root=$X/practical180 \
     --settings=grid_id,grid_ood,pile_id,random_id,identical_2,identical_4 --episodes=180 --recovery=0.3 \
     --workers=2 --resume=true
-  [ -f $X/train_practical_b8/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
-    --policy.type=bbox_diffusion --policy.device=cpu --policy.use_amp=false --policy.image_size=64 \
-    --policy.n_obs_steps=1 --policy.scheduler_warmup_steps=300 --policy.n_action_steps=12 \
+}
+train_b8() {  # train_b8 <name> [policy options]: batch 8 x B8_STEPS on the practical data, float32
+  local name=$1 steps=${B8_STEPS:-12000}
+  shift
+  practical_data
+  [ -f $X/train_$name/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
+    --policy.type=bbox_diffusion --policy.device=cpu --policy.use_amp=false \
+    --policy.scheduler_warmup_steps=300 --policy.n_action_steps=12 "$@" \
     --dataset.repo_id=local/lego_pick_practical --dataset.root=$X/practical180 \
-    --output_dir=$X/train_practical_b8 --steps=$B8_STEPS --batch_size=8 --num_workers=1 \
-    --save_freq=$((B8_STEPS / 2)) --log_freq=50 --wandb.enable=false
-  V="--episodes=30 --seed_start=5000 --videos=0 --num_inference_steps=4 --workers=2"
-  bboxpick-suite --policies=practical_b8=$X/train_practical_b8/checkpoints/last/pretrained_model $V \
-    --out_dir=$X/val_practical_b8
-  publish $X/val_practical_b8 validation_practical_b8
+    --output_dir=$X/train_$name --steps=$steps --batch_size=8 --num_workers=1 \
+    --save_freq=$((steps / 2)) --log_freq=50 --wandb.enable=false
+}
+suite_b8() {  # suite_b8 <val|test> <name>: every setting, 30 scenes, 4 DDIM steps; published and compared
+  local split=$1 name=$2 seed=5000 docs=validation_$2 shipped=$VAL_SHIPPED
+  if [ "$split" = test ]; then seed=10000 docs=$2 shipped=$TEST_SHIPPED; fi
+  bboxpick-suite --policies=$name=$X/train_$name/checkpoints/last/pretrained_model --episodes=30 \
+    --seed_start=$seed --videos=0 --num_inference_steps=4 --workers=2 --out_dir=$X/${split}_$name
+  publish $X/${split}_$name $docs
+  bboxpick-compare --out=docs/results/$docs.md --runs="shipped=$shipped;$name=docs/results/$docs"
+}
+FAST_INPUT="--policy.image_size=64 --policy.n_obs_steps=1"
+if want practical_b8; then
+  train_b8 practical_b8 $FAST_INPUT
   bboxpick-suite --policies=shipped=examples/bbox_diffusion_lego_pick \
-    --settings=grid_id,identical_2,identical_4 $V --out_dir=$X/val_shipped_other3
+    --settings=grid_id,identical_2,identical_4 --episodes=30 --seed_start=5000 --videos=0 \
+    --num_inference_steps=4 --workers=2 --out_dir=$X/val_shipped_other3
   publish $X/val_shipped_other3 validation_shipped_other3
-  bboxpick-compare --out=docs/results/validation_practical_b8.md \
-    --runs="shipped=docs/counterfactual/val_cf/il,docs/results/validation_shipped_other3;practical_b8=docs/results/validation_practical_b8"
+  suite_b8 val practical_b8
 fi
 if want practical_b8_test; then
-  X=outputs/exp
-  bboxpick-suite --policies=practical_b8=$X/train_practical_b8/checkpoints/last/pretrained_model \
-    --episodes=30 --seed_start=10000 --videos=0 --num_inference_steps=4 --workers=2 --out_dir=$X/test_practical_b8
-  publish $X/test_practical_b8 practical_b8
-  bboxpick-compare --out=docs/results/practical_b8.md \
-    --runs="shipped=docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3;practical_b8=docs/results/practical_b8"
+  suite_b8 test practical_b8
+fi
+# The practical recipe's input (issue 14): the same data and schedule with a target view, a 48 px crop
+# three times the box's longer side around the target (--policy.target_crop_size), beside the 64 px frame.
+# Its gains and losses are counted against practical_b8 (the same run without the view) as well.
+if want practical_b8_crop; then
+  train_b8 practical_b8_crop $FAST_INPUT --policy.target_crop_size=48 --policy.target_crop_context=3
+  suite_b8 val practical_b8_crop
+  bboxpick-compare --out=docs/results/validation_practical_b8_crop_vs_b8.md \
+    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_crop=docs/results/validation_practical_b8_crop"
+fi
+if want practical_b8_crop_test; then
+  suite_b8 test practical_b8_crop
+  bboxpick-compare --out=docs/results/practical_b8_crop_vs_b8.md \
+    --runs="practical_b8=docs/results/practical_b8;practical_b8_crop=docs/results/practical_b8_crop"
 fi

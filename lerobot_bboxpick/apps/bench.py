@@ -196,6 +196,7 @@ TRAINING_LEVERS: dict[str, dict[str, Any]] = {
     "64 px": {"image_size": 64},
     "1 observed frame": {"n_obs_steps": 1},
     "64 px, 1 frame (fast encoder)": {"image_size": 64, "n_obs_steps": 1},
+    "fast encoder + 48 px target view": {"image_size": 64, "n_obs_steps": 1, "target_crop_size": 48},
     "half-width UNet": {"down_dims": (32, 64, 128)},
 }
 
@@ -320,6 +321,12 @@ INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
     "64 px, 1 observed frame": {"image_size": 64, "n_obs_steps": 1},
     "64 px, 1 frame, 8 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 8},
     "64 px, 1 frame, 4 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 4},
+    "64 px, 1 frame, 48 px target view, 4 DDIM steps": {
+        "image_size": 64,
+        "n_obs_steps": 1,
+        "target_crop_size": 48,
+        "num_inference_steps": 4,
+    },
 }
 
 

@@ -1,5 +1,5 @@
 """The ``lerobot_bboxpick`` command: ``run`` (the main job: collect -> train -> suite), ``demo`` (expert
-rollouts), ``bench``, ``sheet`` (settings picture)."""
+rollouts), ``bench``, ``sheet`` (settings picture, or the policy's inputs)."""
 
 from __future__ import annotations
 
@@ -73,8 +73,13 @@ def main(argv: list[str] | None = None) -> int:
         "--all", action="store_true", help="--policies --training --inference --collect --suite"
     )
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
-    sheet.add_argument("--out", type=Path, default=Path("examples/settings_contact_sheet.png"))
+    sheet.add_argument("--out", type=Path, default=None, help="default: examples/<sheet name>.png")
     sheet.add_argument("--seed", type=int, default=0)
+    sheet.add_argument(
+        "--inputs",
+        action="store_true",
+        help="instead: what the policy sees per setting (frame, 64 px policy image, 48 px target view)",
+    )
     args = parser.parse_args(argv)
 
     if args.command == "run":
@@ -124,10 +129,14 @@ def main(argv: list[str] | None = None) -> int:
         args.out.write_text(table + "\n")
         print(table)
     else:
-        from lerobot_bboxpick.apps.demo import settings_sheet
+        from lerobot_bboxpick.apps.demo import inputs_sheet, settings_sheet
         from lerobot_bboxpick.viz import save_png
 
-        print(save_png(args.out, settings_sheet(seed=args.seed)))
+        if args.inputs:
+            out, picture = Path("examples/policy_inputs_sheet.png"), inputs_sheet(seed=args.seed)
+        else:
+            out, picture = Path("examples/settings_contact_sheet.png"), settings_sheet(seed=args.seed)
+        print(save_png(args.out or out, picture))
     return 0
 
 

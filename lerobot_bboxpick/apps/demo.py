@@ -30,6 +30,44 @@ def settings_sheet(seed: int = 0, scale: int = 2) -> np.ndarray:
     return contact_sheet(tiles, columns=3, scale=scale)
 
 
+def inputs_sheet(
+    seed: int = 0, image_size: int = 64, crop_size: int = 48, context: float = 3.0, min_side: float = 0.1
+) -> np.ndarray:
+    """What the policy sees of each setting's first frame, one row per setting: the 224 px frame with the
+    target's box, the policy image (centre crop resized to ``image_size``) and the target view
+    (``crop_size`` px, ``context`` box sides), each shown at 224 px (nearest) so pixels stay pixels."""
+    import cv2
+    import torch
+
+    from lerobot_bboxpick.keys import ENV_BBOX, ENV_CAMERA, ENV_PIXELS
+    from lerobot_bboxpick.policies.bbox_diffusion.encoder import PairedAugment
+    from lerobot_bboxpick.policies.bbox_diffusion.target_crop import crop_windows, target_windows
+    from lerobot_bboxpick.viz import draw_bbox
+
+    def shown(chw: torch.Tensor, side: int) -> np.ndarray:
+        rgb = (chw.permute(1, 2, 0).clamp(0, 1).numpy() * 255).round().astype(np.uint8)
+        return cv2.resize(rgb, (side, side), interpolation=cv2.INTER_NEAREST)
+
+    tiles = []
+    for setting in SETTINGS:
+        env = LegoPickEnv(setting=setting)
+        obs, _ = env.reset(seed=seed)
+        env.close()
+        frame, bbox = obs[ENV_PIXELS][ENV_CAMERA], obs[ENV_BBOX]
+        side = frame.shape[0]
+        image = torch.as_tensor(frame).permute(2, 0, 1)[None].float() / 255
+        small, _ = PairedAugment().eval()(image, None, out_size=image_size)
+        box = torch.as_tensor(bbox, dtype=torch.float32)[None]
+        window = target_windows(box, *frame.shape[:2], context, min_side)
+        crop = crop_windows(image, window, crop_size)
+        tiles += [
+            label(draw_bbox(frame.copy(), bbox, color=(255, 255, 0)), setting),
+            label(shown(small[0], side), f"policy image {image_size} px"),
+            label(shown(crop[0], side), f"target view {crop_size} px"),
+        ]
+    return contact_sheet(tiles, columns=3)
+
+
 def run_demo(out_dir: Path, episodes: int = 1, seed: int = 0, settings: tuple[str, ...] = SETTINGS) -> Path:
     """Roll the scripted expert out ``episodes`` times per setting; return the outcomes table path."""
     out_dir.mkdir(parents=True, exist_ok=True)

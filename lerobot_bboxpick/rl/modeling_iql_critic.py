@@ -37,6 +37,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import (
     BboxDiffusionPolicy,
     PoseScaler,
     global_condition_dim,
+    image_feature_dim,
 )
 from lerobot_bboxpick.rl.configuration_iql_critic import IqlCriticConfig
 from lerobot_bboxpick.rl.iql import IqlBatch, IqlCritic, IqlDims
@@ -53,8 +54,8 @@ class PolicyObservationEncoder(nn.Module):
     """The ``bbox_diffusion`` observation path, on its own copies of the policy's modules.
 
     ``forward`` calls ``BboxDiffusionModel.global_condition`` itself (it only reads ``config``,
-    ``augment``, ``encoder`` and ``obs_scaler``, which this module has under the same names), so the
-    features cannot drift from the policy's when that code changes.
+    ``augment``, ``encoder``, ``target_view`` and ``obs_scaler``, which this module has under the same
+    names), so the features cannot drift from the policy's when that code changes.
     """
 
     def __init__(self, model: BboxDiffusionModel) -> None:
@@ -62,6 +63,7 @@ class PolicyObservationEncoder(nn.Module):
         super().__init__()
         self.config: BboxDiffusionConfig = model.config
         self.encoder = copy.deepcopy(model.encoder)
+        self.target_view = copy.deepcopy(model.target_view)
         self.augment = copy.deepcopy(model.augment)
         self.obs_scaler = copy.deepcopy(model.obs_scaler)
 
@@ -74,7 +76,7 @@ class PolicyObservationEncoder(nn.Module):
     @property
     def out_dim(self) -> int:
         """Width of the state feature: the policy's global condition width."""
-        return global_condition_dim(self.config, self.encoder.out_dim)
+        return global_condition_dim(self.config, image_feature_dim(self))
 
     def forward(self, batch: dict[str, Tensor]) -> Tensor:
         """Observations ``(B, n_obs, ...)`` (images in [0, 1], absolute states, bboxes) -> ``(B, D)``."""

@@ -57,6 +57,13 @@ class BboxDiffusionConfig(PreTrainedConfig):
     crop_ratio: float = 0.95
     # ColorJitter (brightness, contrast, saturation, hue), UMI's values.
     color_jitter: tuple[float, float, float, float] = (0.3, 0.4, 0.5, 0.08)
+    # The target view (``target_crop``): with target_crop_size > 0, a square window around the target's
+    # box, target_crop_context times its longer side (at least target_crop_min_side of the image), is
+    # resampled to target_crop_size px from the stored frame and encoded by a second encoder of the same
+    # architecture, its feature joining the global condition. 0: off (the shipped recipe's input).
+    target_crop_size: int = 0
+    target_crop_context: float = 3.0
+    target_crop_min_side: float = 0.1
 
     # UNet (LeRobot's DiffusionConditionalUnet1d).
     down_dims: tuple[int, ...] = (64, 128, 256)
@@ -170,6 +177,16 @@ class BboxDiffusionConfig(PreTrainedConfig):
                 raise ValueError(f"{name}={getattr(self, name)!r} must be in [0, 10) seconds")
         if not 0.0 < self.control_fps <= 1000.0:
             raise ValueError(f"control_fps={self.control_fps!r} must be in (0, 1000] Hz")
+        if self.target_crop_size != 0 and not 16 <= self.target_crop_size <= 512:
+            raise ValueError(f"target_crop_size={self.target_crop_size} must be 0 (off) or in [16, 512] px")
+        if self.target_crop_size and self.bbox_mode == "none":
+            raise ValueError(
+                "target_crop_size > 0 needs the target's box: bbox_mode must be 'mask' or 'lowdim'"
+            )
+        if not self.target_crop_context >= 1.0:
+            raise ValueError(f"target_crop_context={self.target_crop_context!r} must be >= 1 (box sides)")
+        if not 0.0 < self.target_crop_min_side <= 1.0:
+            raise ValueError(f"target_crop_min_side={self.target_crop_min_side!r} must be in (0, 1]")
         if not 0.5 <= self.crop_ratio <= 1.0:
             raise ValueError(f"crop_ratio={self.crop_ratio} must be in [0.5, 1]")
         if not self.awr_temperature > 0.0:

@@ -39,6 +39,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     bbox_to_mask,
     mask_moments,
 )
+from lerobot_bboxpick.policies.bbox_diffusion.target_crop import TargetView
 
 log = logging.getLogger(__name__)
 
@@ -100,27 +101,53 @@ def global_condition_dim(config: BboxDiffusionConfig, image_feature_dim: int) ->
     return config.n_obs_steps * (image_feature_dim + lowdim)
 
 
+def backbone_options(config: BboxDiffusionConfig) -> dict:
+    """``MaskedImageEncoder`` keywords of the policy's architecture, shared by the main encoder and the
+    target view's (which differ in image size and mask channel only)."""
+    return {
+        "backbone": config.backbone,
+        "pretrained": config.pretrained_backbone,
+        "pooling": config.pooling,
+        "feature_stage": config.feature_stage,
+        "num_keypoints": config.num_keypoints,
+        "group_norm": config.group_norm,
+    }
+
+
+def build_target_view(config: BboxDiffusionConfig) -> TargetView | None:
+    """The target view of ``config`` (``target_crop_size`` > 0), else None."""
+    if not config.target_crop_size:
+        return None
+    return TargetView(
+        config.target_crop_size,
+        config.target_crop_context,
+        config.target_crop_min_side,
+        backbone_options(config),
+        color_jitter=config.color_jitter,
+    )
+
+
+def image_feature_dim(module: nn.Module) -> int:
+    """Image features per observed step of a module holding ``encoder`` and ``target_view`` (the model,
+    or the critic's copy of its observation path)."""
+    return module.encoder.out_dim + (module.target_view.out_dim if module.target_view is not None else 0)
+
+
 class BboxDiffusionModel(nn.Module):
-    """Observation encoder + conditional UNet + DDIM scheduler."""
+    """Observation encoder (+ target view) + conditional UNet + DDIM scheduler."""
 
     def __init__(self, config: BboxDiffusionConfig) -> None:
         super().__init__()
         self.config = config
         self.encoder = MaskedImageEncoder(
-            config.backbone,
-            pretrained=config.pretrained_backbone,
-            image_size=config.image_size,
-            use_mask=config.bbox_mode == "mask",
-            pooling=config.pooling,
-            feature_stage=config.feature_stage,
-            num_keypoints=config.num_keypoints,
-            group_norm=config.group_norm,
+            image_size=config.image_size, use_mask=config.bbox_mode == "mask", **backbone_options(config)
         )
+        self.target_view = build_target_view(config)
         self.augment = PairedAugment(crop_ratio=config.crop_ratio, color_jitter=config.color_jitter)
         self.obs_scaler = PoseScaler(config.obs_position_scale, config.max_gripper_width)
         self.action_scaler = PoseScaler(config.action_position_scale, config.max_gripper_width)
         self.unet = DiffusionConditionalUnet1d(
-            config, global_cond_dim=global_condition_dim(config, self.encoder.out_dim)
+            config, global_cond_dim=global_condition_dim(config, image_feature_dim(self))
         )
         self.noise_scheduler = DDIMScheduler(
             num_train_timesteps=config.num_train_timesteps,
@@ -159,7 +186,16 @@ class BboxDiffusionModel(nn.Module):
             if self.config.mask_centroid:  # measured after the crop: consistent with the pixels
                 lowdim.append(mask_moments(mask))
         features = self.encoder(rgb, mask).view(b, t, -1).float()
+        if self.target_view is not None:  # the raw frames: the window is cut before any crop or resize
+            features = torch.cat([features, self.target_view(images, bboxes).view(b, t, -1).float()], dim=-1)
         return torch.cat([features, *lowdim], dim=-1).flatten(1)
+
+    def backbone_parameters(self) -> list[nn.Parameter]:
+        """Parameters of the image backbones (the main encoder's and the target view's)."""
+        params = list(self.encoder.backbone_parameters())
+        if self.target_view is not None:
+            params += self.target_view.encoder.backbone_parameters()
+        return params
 
     def _inputs(self, batch: dict[str, Tensor]) -> tuple[Tensor, Tensor, Tensor | None]:
         images = batch[self.config.image_key]
@@ -295,7 +331,7 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
 
     def get_optim_params(self) -> list[dict]:
         """Two parameter groups: the backbone (lr scaled by encoder_lr_scale) and the rest."""
-        backbone = list(self.model.encoder.backbone_parameters())
+        backbone = self.model.backbone_parameters()
         backbone_ids = {id(p) for p in backbone}
         rest = [p for p in self.model.parameters() if id(p) not in backbone_ids]
         return [
