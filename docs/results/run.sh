@@ -208,3 +208,8 @@ if want practical_b8_norecovery; then
   bboxpick-compare --out=docs/results/validation_practical_b8_norecovery_vs_b8.md \
     --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_norecovery=docs/results/validation_practical_b8_norecovery"
 fi
+if want practical_b8_norecovery_test; then
+  suite_b8 test practical_b8_norecovery
+  bboxpick-compare --out=docs/results/practical_b8_norecovery_vs_b8.md \
+    --runs="practical_b8=docs/results/practical_b8;practical_b8_norecovery=docs/results/practical_b8_norecovery"
+fi
