@@ -159,6 +159,12 @@ suite_b8() {  # suite_b8 <val|test> <name>: every setting, 30 scenes, 4 DDIM ste
   publish $X/${split}_$name $docs
   bboxpick-compare --out=docs/results/$docs.md --runs="shipped=$shipped;$name=docs/results/$docs"
 }
+compare_b8() {  # compare_b8 <val|test> <name>: gains and losses against practical_b8 on the same scenes
+  local docs=$2 base=practical_b8
+  if [ "$1" = val ]; then docs=validation_$2 base=validation_practical_b8; fi
+  bboxpick-compare --out=docs/results/${docs}_vs_b8.md \
+    --runs="practical_b8=docs/results/$base;$2=docs/results/$docs"
+}
 FAST_INPUT="--policy.image_size=64 --policy.n_obs_steps=1"
 PRACTICAL="local/lego_pick_practical $X/practical180"  # repo_id and root, word-split on use
 NO_RECOVERY="local/lego_pick_practical_norec $X/practical180_norec"
@@ -181,13 +187,11 @@ if want practical_b8_crop; then
   practical_data $PRACTICAL 0.3
   train_b8 practical_b8_crop $PRACTICAL $FAST_INPUT --policy.target_crop_size=48 --policy.target_crop_context=3
   suite_b8 val practical_b8_crop
-  bboxpick-compare --out=docs/results/validation_practical_b8_crop_vs_b8.md \
-    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_crop=docs/results/validation_practical_b8_crop"
+  compare_b8 val practical_b8_crop
 fi
 if want practical_b8_crop_test; then
   suite_b8 test practical_b8_crop
-  bboxpick-compare --out=docs/results/practical_b8_crop_vs_b8.md \
-    --runs="practical_b8=docs/results/practical_b8;practical_b8_crop=docs/results/practical_b8_crop"
+  compare_b8 test practical_b8_crop
 fi
 # The shipped checkpoint at its own 16 DDIM steps on every setting's validation scenes, beside its 4-step
 # rows (docs/counterfactual/val_cf/il + validation_shipped_other3): issue 14's speed goal asks for a chunk in
@@ -205,11 +209,9 @@ if want practical_b8_norecovery; then
   practical_data $NO_RECOVERY 0
   train_b8 practical_b8_norecovery $NO_RECOVERY $FAST_INPUT
   suite_b8 val practical_b8_norecovery
-  bboxpick-compare --out=docs/results/validation_practical_b8_norecovery_vs_b8.md \
-    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_norecovery=docs/results/validation_practical_b8_norecovery"
+  compare_b8 val practical_b8_norecovery
 fi
 if want practical_b8_norecovery_test; then
   suite_b8 test practical_b8_norecovery
-  bboxpick-compare --out=docs/results/practical_b8_norecovery_vs_b8.md \
-    --runs="practical_b8=docs/results/practical_b8;practical_b8_norecovery=docs/results/practical_b8_norecovery"
+  compare_b8 test practical_b8_norecovery
 fi
