@@ -14,6 +14,7 @@ from lerobot_bboxpick.eval.paired import (
     parse_runs,
     sign_test_p,
 )
+from lerobot_bboxpick.eval.target_yaw import target_yaw_off_axis, yaw_bin
 
 
 def _suite(folder, outcomes: dict) -> str:
@@ -58,3 +59,66 @@ def test_a_scene_twice_and_a_missing_folder_are_errors(tmp_path):
     assert result.returncode != 0 and "has no episodes.jsonl" in result.stderr
     with pytest.raises(ValueError, match="is not NAME=dir"):
         parse_runs("IL")
+
+
+def test_target_yaw_is_the_scene_s_own():
+    """Grid targets are turned at most 10 degrees (the layout's jitter), random ones spread over 0-45,
+    and the value is the turn the simulator's settled brick actually has."""
+    import numpy as np
+
+    from lerobot_bboxpick.sim.env import LegoPickEnv
+
+    grid = [target_yaw_off_axis("grid_id", seed) for seed in range(20)]
+    assert max(grid) <= 10.0
+    turned = [target_yaw_off_axis("random_id", seed) for seed in range(60)]
+    assert min(turned) >= 0.0 and max(turned) <= 45.0
+    assert all(sum(yaw_bin(y) == b for y in turned) >= 10 for b in range(3))  # uniform over 0-45: ~20 each
+    env = LegoPickEnv(setting="random_id", episode_length=10)
+    try:
+        for seed in (3, 4):
+            env.reset(seed=seed)
+            R = env.brick_pose(env.target)[:3, :3]
+            settled = float(np.degrees(np.arctan2(R[1, 0], R[0, 0]))) % 90.0
+            assert min(settled, 90 - settled) == pytest.approx(
+                target_yaw_off_axis("random_id", seed), abs=1.0
+            )
+    finally:
+        env.close()
+
+
+def test_compare_by_target_yaw_splits_each_setting_by_the_target_s_turn(tmp_path):
+    """A policy that picks only targets turned under 15 degrees: the CLI's table shows every pick in the
+    first bin and every turned target as an empty miss; @label keeps one policy of a two-policy suite."""
+    seeds = range(30)
+    aligned = {s for s in seeds if target_yaw_off_axis("random_id", s) < 15.0}
+    folder = tmp_path / "suite"
+    folder.mkdir()
+    lines = [
+        json.dumps({"policy": p, "setting": "random_id", "seed": s, "outcome": o})
+        for s in seeds
+        for p, o in (("expert", "pick"), ("il", "pick" if s in aligned else "empty"))
+    ]
+    (folder / "episodes.jsonl").write_text("\n".join(lines) + "\n")
+    out = tmp_path / "yaw.md"
+    result = subprocess.run(
+        [sys.executable, "-m", "lerobot_bboxpick.eval.paired", f"--runs=IL={folder}@il", "--by=target_yaw",
+         f"--out={out}"],
+        capture_output=True, text=True, env=cli_env(),
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    row = out.read_text().splitlines()[2].split(" | ")
+    n_turned = len(seeds) - len(aligned)
+    assert row[:3] == ["| IL", "random_id", f"{len(aligned)}/{len(aligned)} " + row[2].split(" ", 1)[1]]
+    assert [cell.split(" ")[0] for cell in row[3:5]] == [
+        f"0/{sum(yaw_bin(target_yaw_off_axis('random_id', s)) == b for s in seeds)}" for b in (1, 2)
+    ]
+    assert row[5] == f"{n_turned} / 0 |"
+    with pytest.raises(ValueError, match="policy 'dp'; policies: \\['expert', 'il'\\]"):
+        load_outcomes([f"{folder}@dp"])
+    with pytest.raises(ValueError, match="appears twice"):
+        load_outcomes([folder])  # two policies on the same scenes need a label
+    bad = subprocess.run(
+        [sys.executable, "-m", "lerobot_bboxpick.eval.paired", f"--runs=IL={folder}@il", "--by=yaw"],
+        capture_output=True, text=True, env=cli_env(),
+    )  # fmt: skip
+    assert bad.returncode != 0 and "by='yaw': allowed values are setting, target_yaw" in bad.stderr

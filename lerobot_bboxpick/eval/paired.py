@@ -9,7 +9,8 @@ Wrong rate, and, for every run after the first (the baseline), the scenes it pic
 not (+) and the reverse (-). Scenes are matched by setting and seed, so the counts are paired: on 30
 scenes a setting's intervals overlap for a 15-point change, while the paired counts show which scenes
 moved. The last column pools every setting and gives the two-sided sign test of the gains against the
-losses (ties, scenes both pick or both miss, carry no information).
+losses (ties, scenes both pick or both miss, carry no information). ``--by=target_yaw`` breaks each
+run's settings down by how far the target is turned instead (``lerobot_bboxpick.eval.target_yaw``).
 """
 
 from dataclasses import dataclass
@@ -19,20 +20,30 @@ import draccus
 from scipy.stats import binomtest
 
 from lerobot_bboxpick.eval.suite import read_episodes, wilson_interval
+from lerobot_bboxpick.eval.target_yaw import target_yaw_table
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
 Scene = tuple[str, int]  # (setting, seed)
+BY = ("setting", "target_yaw")  # the table's rows: bboxpick-compare --by
 
 
 def load_outcomes(folders: list[Path]) -> dict[Scene, str]:
     """Each scene's outcome in the suites at ``folders`` (their ``episodes.jsonl``); a scene twice is an
-    error."""
+    error. ``dir@label`` keeps only the episodes of that policy label (a suite run with several
+    policies, e.g. ``expert,bbox_diffusion``)."""
     outcomes: dict[Scene, str] = {}
     for folder in folders:
-        path = Path(folder) / "episodes.jsonl"
+        where, _, label = str(folder).partition("@")
+        path = Path(where) / "episodes.jsonl"
         if not path.is_file():
-            raise ValueError(f"runs: {folder} has no episodes.jsonl (a bboxpick-suite --out_dir)")
-        for episode in read_episodes(path):
+            raise ValueError(f"runs: {where} has no episodes.jsonl (a bboxpick-suite --out_dir)")
+        episodes = read_episodes(path)
+        if label:
+            labels = sorted({e.get("policy", "") for e in episodes})
+            episodes = [e for e in episodes if e.get("policy") == label]
+            if not episodes:
+                raise ValueError(f"runs: {folder}: no episodes of policy {label!r}; policies: {labels}")
+        for episode in episodes:
             scene = (episode["setting"], int(episode["seed"]))
             if scene in outcomes:
                 raise ValueError(f"runs: scene {scene} appears twice in {', '.join(map(str, folders))}")
@@ -109,16 +120,25 @@ def parse_runs(spec: str) -> dict[str, list[Path]]:
 class CompareConfig:
     """Options of ``bboxpick-compare``."""
 
-    # "NAME=dir[,dir...];NAME=dir...": suite folders per run, the baseline first.
+    # "NAME=dir[,dir...];NAME=dir...": suite folders per run, the baseline first; "dir@label" keeps only
+    # that policy's episodes of a suite that ran several.
     runs: str = ""
     # Write the table here too (markdown); None: print only.
     out: Path | None = None
+    # Rows of the table: "setting" (paired gains and losses against the first run) or "target_yaw" (each
+    # run's Pick per setting and per bin of the target's yaw off the grid axes).
+    by: str = "setting"
+
+    def __post_init__(self) -> None:
+        if self.by not in BY:
+            raise ValueError(f"by={self.by!r}: allowed values are {', '.join(BY)}")
 
 
 @draccus.wrap()
 def main(cfg: CompareConfig) -> None:
     """Entry point of ``bboxpick-compare``."""
-    table = comparison_table({name: load_outcomes(folders) for name, folders in parse_runs(cfg.runs).items()})
+    runs = {name: load_outcomes(folders) for name, folders in parse_runs(cfg.runs).items()}
+    table = comparison_table(runs) if cfg.by == "setting" else target_yaw_table(runs)
     if cfg.out is not None:
         Path(cfg.out).write_text(table)
     print(table, end="")
