@@ -242,3 +242,10 @@ if want target_yaw; then
   done
   bboxpick-compare --by=target_yaw --runs="$runs" --out=docs/results/target_yaw.md
 fi
+# Where the shipped checkpoint closes the gripper on random_id validation scenes (lerobot_bboxpick trace):
+# beside and above the target's bottom face (mm), and its yaw error (deg), at 4 DDIM steps as in the suites.
+if want trace; then
+  lerobot_bboxpick trace --policy examples/bbox_diffusion_lego_pick --setting random_id \
+    --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out docs/results/trace_shipped_random_id.md
+fi

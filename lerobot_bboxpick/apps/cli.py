@@ -1,5 +1,6 @@
 """The ``lerobot_bboxpick`` command: ``run`` (the main job: collect -> train -> suite), ``demo`` (expert
-rollouts), ``bench``, ``sheet`` (settings picture, or the policy's inputs)."""
+rollouts), ``bench``, ``sheet`` (settings picture, or the policy's inputs), ``trace`` (where a policy
+closes the gripper, relative to its target)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,16 @@ def _positive(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
     return value
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not comma-separated integers") from None
+    if not seeds:
+        raise argparse.ArgumentTypeError("give at least one seed")
+    return seeds
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -80,6 +91,16 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="instead: what the policy sees per setting (frame, 64 px policy image, 48 px target view)",
     )
+    trace = sub.add_parser(
+        "trace", help="per episode: where the gripper closes relative to the target (mm, deg)"
+    )
+    trace.add_argument("--policy", required=True, help="a checkpoint folder (pretrained_model) or 'expert'")
+    trace.add_argument("--setting", type=lambda text: _settings(text)[0], default="random_id")
+    trace.add_argument("--seeds", type=_seeds, required=True, help="comma-separated scene seeds")
+    trace.add_argument(
+        "--num-inference-steps", type=_positive, default=None, help="default: the checkpoint's"
+    )
+    trace.add_argument("--out", type=Path, default=None, help="also write the markdown table here")
     args = parser.parse_args(argv)
 
     if args.command == "run":
@@ -128,6 +149,10 @@ def main(argv: list[str] | None = None) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(table + "\n")
         print(table)
+    elif args.command == "trace":
+        from lerobot_bboxpick.eval.trace import run_trace, write_trace
+
+        write_trace(run_trace(args.policy, args.setting, args.seeds, args.num_inference_steps), args.out)
     else:
         from lerobot_bboxpick.apps.demo import inputs_sheet, settings_sheet
         from lerobot_bboxpick.viz import save_png
