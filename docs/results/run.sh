@@ -137,9 +137,10 @@ X=outputs/exp
 VAL_SHIPPED="docs/counterfactual/val_cf/il,docs/results/validation_shipped_other3"
 TEST_SHIPPED="docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3"
 practical_data() {  # practical_data <repo_id> <root> <recovery fraction>: the 180 demos of every layout
+  # (EXPERT_TURN=late: the expert turns the gripper above the brick instead of on the way)
   bboxpick-collect --repo_id=$1 --root=$2 \
     --settings=grid_id,grid_ood,pile_id,random_id,identical_2,identical_4 --episodes=180 --recovery=$3 \
-    --workers=2 --resume=true
+    --workers=2 --resume=true ${EXPERT_TURN:+--expert_turn=$EXPERT_TURN}
 }
 train_b8() {  # train_b8 <name> <repo_id> <root> [policy options]: batch 8 x B8_STEPS, float32
   local name=$1 repo=$2 root=$3 steps=${B8_STEPS:-12000}
@@ -232,11 +233,20 @@ if want practical_b8_obs2; then
   variant_b8 practical_b8_obs2 $PRACTICAL 0.3 --policy.image_size=64 --policy.n_obs_steps=2
 fi
 if want practical_b8_obs2_test; then variant_b8_test practical_b8_obs2; fi
+# The expert turns late (issue 14): the one-frame policies never turn the gripper (trace above), and the
+# expert turns on the way, while the brick spans 2-3 px of the policy image; the same 180 seeds recorded
+# with the expert keeping its start rotation until it is above the brick, then turning there.
+LATE_TURN="local/lego_pick_practical_late $X/practical180_late"
+if want practical_b8_lateturn; then
+  EXPERT_TURN=late variant_b8 practical_b8_lateturn $LATE_TURN 0.3 $FAST_INPUT
+fi
+if want practical_b8_lateturn_test; then variant_b8_test practical_b8_lateturn; fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
 # paper protocol's two-frame 96 px policy (grid demos only), the shipped checkpoint, the batch-8 variants.
 if want target_yaw; then
   runs="paper_protocol=docs/results/recipe_oracle@bbox_diffusion;shipped=docs/results/practical_oracle@practical"
   for name in practical_b8 practical_b8_crop practical_b8_norecovery practical_b8_rec06 practical_b8_seed1 \
+    practical_b8_lateturn \
     practical_b8_obs2; do
     [ -f docs/results/$name/episodes.jsonl ] && runs="$runs;$name=docs/results/$name"
   done

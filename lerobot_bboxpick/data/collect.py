@@ -42,6 +42,7 @@ from lerobot_bboxpick.data.features import (
 )
 from lerobot_bboxpick.parallel import check_ray, worker_pool
 from lerobot_bboxpick.quiet import native_output_to, quiet_libraries, redirect_native_output
+from lerobot_bboxpick.sim.expert import TURNS
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
@@ -74,6 +75,9 @@ class CollectConfig:
     # Fraction of episodes that start with an unrecorded off-course lead-in and record the expert's
     # recovery from there (lerobot_bboxpick.data.recovery); 0: plain demos.
     recovery: float = 0.0
+    # When the expert turns the gripper onto the brick: "early" (on the way, from the start) or "late"
+    # (above the brick, where the wrist camera sees its yaw; lerobot_bboxpick.sim.expert).
+    expert_turn: str = "early"
     resume: bool = False
     # Episodes per shard: the most work an interruption can lose.
     shard_size: int = SHARD_SIZE
@@ -92,6 +96,8 @@ class CollectConfig:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
         if not 0.0 <= self.recovery <= 1.0:
             raise ValueError(f"recovery={self.recovery!r} must be a fraction in [0, 1]")
+        if self.expert_turn not in TURNS:
+            raise ValueError(f"expert_turn={self.expert_turn!r}: allowed values are {', '.join(TURNS)}")
         seeds.check_split(self.split)
         check_ray(self.ray_address)
         if self.seed_start is None:
@@ -136,7 +142,15 @@ class EpisodeRecorder:
 
 @dataclass(frozen=True)
 class ExpertRecorder(EpisodeRecorder):
-    """The scripted expert, run until its plan is done (it carries the brick away after the pick)."""
+    """The scripted expert, run until its plan is done (it carries the brick away after the pick);
+    ``turn``: when it turns the gripper onto the brick (``ScriptedExpert``)."""
+
+    turn: str = "early"
+
+    @property
+    def run_key(self) -> dict | None:
+        """Late-turn demos must not be mixed with early-turn ones (early: None, as before the option)."""
+        return None if self.turn == "early" else {"expert_turn": self.turn}
 
     def make_env(self, setting: str) -> Any:
         """An env that keeps running after a lift, so the expert's plan completes."""
@@ -146,16 +160,16 @@ class ExpertRecorder(EpisodeRecorder):
 
     def __call__(self, env: Any, seed: int) -> tuple[list[dict], str]:
         """``record_episode`` of the expert."""
-        return record_episode(env, seed)
+        return record_episode(env, seed, turn=self.turn)
 
 
-def expert_recorder(recovery: float) -> EpisodeRecorder:
+def expert_recorder(recovery: float, turn: str = "early") -> EpisodeRecorder:
     """The scripted expert's recorder: plain demos, or that fraction of recovery demos."""
     if recovery <= 0:
-        return ExpertRecorder()
+        return ExpertRecorder(turn=turn)
     from lerobot_bboxpick.data.recovery import RecoveryRecorder  # it builds on this module
 
-    return RecoveryRecorder(fraction=recovery)
+    return RecoveryRecorder(turn=turn, fraction=recovery)
 
 
 @dataclass(frozen=True)
@@ -201,17 +215,18 @@ def close_episode(frames: list[dict], outcome: str) -> tuple[list[dict], str]:
 
 
 def record_episode(
-    env, seed: int, rng_seed: int | None = None, options: dict | None = None
+    env, seed: int, rng_seed: int | None = None, options: dict | None = None, turn: str = "early"
 ) -> tuple[list[dict], str]:
     """Run the scripted expert on ``env`` for ``seed``; return the frames and the outcome.
 
     ``rng_seed`` seeds the expert's own variation (speed, approach offset); default: ``seed``.
     ``options`` go to ``env.reset`` (e.g. ``{"target": k}`` to designate another brick of the scene).
+    ``turn``: when the expert turns the gripper onto the brick (``ScriptedExpert``).
     """
     from lerobot_bboxpick.sim.expert import ScriptedExpert
 
     obs, info = env.reset(seed=seed, options=options)
-    expert = ScriptedExpert(np.random.default_rng(seed if rng_seed is None else rng_seed))
+    expert = ScriptedExpert(np.random.default_rng(seed if rng_seed is None else rng_seed), turn=turn)
     expert.reset(env)
     return run_expert(env, obs, info, expert)
 
@@ -333,7 +348,7 @@ def collect(
     recovery demos, ``expert_recorder``); the datasets at
     ``merge_with`` are aggregated into ``root`` before the recorded episodes.
     """
-    recorder = recorder or expert_recorder(cfg.recovery)
+    recorder = recorder or expert_recorder(cfg.recovery, cfg.expert_turn)
     if cfg.root.exists() and not cfg.resume:
         raise FileExistsError(
             f"root={cfg.root} already exists; pass --resume=true to continue that collection "

@@ -80,8 +80,9 @@ class RecoveryRecorder(ExpertRecorder):
 
     @property
     def run_key(self) -> dict:
-        """The fraction decides which seeds are recoveries: a resumed collection must keep it."""
-        return {"recovery": self.fraction}
+        """The fraction decides which seeds are recoveries: a resumed collection must keep it (and the
+        expert's turn, when late)."""
+        return {"recovery": self.fraction, **(super().run_key or {})}
 
     def __call__(self, env: Any, seed: int) -> tuple[list[dict], str]:
         """The seed's episode: a plain expert demo, or a lead-in (not recorded) and the recovery."""
@@ -92,6 +93,6 @@ class RecoveryRecorder(ExpertRecorder):
                 obs, _, terminated, truncated, info = env.step(action)
                 if terminated or truncated:
                     break
-        expert = ScriptedExpert(np.random.default_rng(seed))
+        expert = ScriptedExpert(np.random.default_rng(seed), turn=self.turn)
         expert.reset(env)
         return run_expert(env, obs, info, expert)

@@ -4,6 +4,8 @@ Phases (paper section 4.3): from the start pose, approach above the target while
 gripper top-down with its fingers across the brick's faces, descend, close, lift, and carry the brick
 back toward the start pose. Each segment is a minimum-jerk blend (position lerp + rotation slerp),
 so motions start and stop smoothly; per-episode speed and approach offsets come from a seeded rng.
+``turn="late"`` keeps the start rotation on the way and turns once above the brick, where a wrist camera
+sees the brick's yaw (on the way the brick spans 2-3 px of a 64 px policy image).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ PREGRASP_HEIGHT = 0.09
 LIFT_HEIGHT = 0.16
 OPEN_WIDTH = 0.075
 CLOSED_WIDTH = 0.0
+TURNS = ("early", "late")  # when the expert turns the gripper onto the brick: on the way, or above it
+TURN_SECONDS = 0.8  # the late turn, above the brick
 
 
 def min_jerk(s: np.ndarray) -> np.ndarray:
@@ -57,9 +61,14 @@ def grasp_rotation(brick_yaw: float, current_yaw: float = 0.0) -> np.ndarray:
 class ScriptedExpert:
     """Plans a pick of ``env``'s target (or of ``brick``) at reset and replays it step by step."""
 
-    def __init__(self, rng: np.random.Generator | None = None, vary: bool = True) -> None:
+    def __init__(
+        self, rng: np.random.Generator | None = None, vary: bool = True, turn: str = "early"
+    ) -> None:
+        if turn not in TURNS:
+            raise ValueError(f"turn={turn!r}: allowed values are {', '.join(TURNS)}")
         self.rng = rng or np.random.default_rng(0)
         self.vary = vary
+        self.turn = turn
         self._actions: np.ndarray | None = None
         self._i = 0
 
@@ -94,8 +103,10 @@ class ScriptedExpert:
             ]
         else:
             above = np.array([p[0] + offset[0], p[1] + offset[1], p[2] + PREGRASP_HEIGHT])
+            turn_late = self.turn == "late"
             approach = [
-                Waypoint(pose(above, R_grasp), OPEN_WIDTH, 2.2 / speed),
+                Waypoint(pose(above, T0[:3, :3] if turn_late else R_grasp), OPEN_WIDTH, 2.2 / speed),
+                *([Waypoint(pose(above, R_grasp), OPEN_WIDTH, TURN_SECONDS / speed)] if turn_late else []),
                 Waypoint(
                     pose(np.array([p[0], p[1], p[2] + PREGRASP_HEIGHT * 0.5]), R_grasp),
                     OPEN_WIDTH,
