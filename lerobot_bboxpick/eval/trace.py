@@ -48,7 +48,7 @@ class EpisodeTrace:
 
 def trace_episode(runner: Any, env: Any, setting: str, seed: int) -> EpisodeTrace:
     """Run ``runner`` (``PolicyRunner`` or ``ExpertRunner``) on scene ``seed`` of ``env``'s setting, as the
-    suite runs it, recording the state before every action."""
+    suite runs it, recording every action with the pose it led to."""
     from lerobot_bboxpick.eval.rollout import rollout
 
     offsets, yaw_errors, commands = [], [], []
