@@ -115,6 +115,24 @@ def test_quick_and_practical_profiles_train_the_fast_encoder_and_full_the_preset
     practical = PROFILES["practical"]
     assert practical.recovery == 0.3 and practical.train_settings.split(",") == list(SETTINGS)
     assert PROFILES["full"].recovery == PROFILES["quick"].recovery == 0.0
+    # The first run loads data in the trainer's process (a worker slows a 2-core step) and learns at lr 1e-3
+    # (its few steps on a slow machine); the recipes keep one worker and the policy's default lr.
+    for name, workers in (("quick", 0), ("practical", 1), ("full", 1)):
+        args = train_command(PROFILES[name], tmp_path, "local/x", tmp_path / name, 100, False)
+        assert f"--num_workers={workers}" in args, name
+        assert ("--policy.optimizer_lr=1e-3" in args) == (name == "quick"), name
+
+
+def test_calibration_rate_is_wall_clock_after_the_first_log_line():
+    """The budget is sized from wall-clock seconds per step after the warm-up interval, which includes
+    what the logged update/data times leave out; fewer than two log lines give no rate."""
+    from lerobot_bboxpick.apps.main_job import wall_seconds_per_step
+
+    # Warm-up: 10 steps in 9 s; then 30 steps in 15 s (0.5 s/step), whatever lerobot-train logged.
+    marks = [(109.0, 10), (114.0, 20), (119.0, 30), (124.0, 40)]
+    assert wall_seconds_per_step(marks) == pytest.approx(0.5)
+    assert wall_seconds_per_step(marks[:1]) is None and wall_seconds_per_step([]) is None
+    assert wall_seconds_per_step([(1.0, 10), (2.0, 10)]) is None
 
 
 def test_quick_training_is_sized_by_its_time_budget_and_full_by_its_samples():

@@ -110,6 +110,37 @@ if want main_job; then
   bash scripts/main.sh --out-dir outputs/main_job | tee outputs/main_job.console.txt
   publish outputs/main_job/quick/suite main_job
 fi
+# The quick profile on a slow machine (AVX2 only, float32; 2026-12-05), where its 9 minutes fit ~1600 batch-8
+# steps: the policy's default lr 3e-4 against 1e-3, data loaded in the trainer's process (--num_workers=0),
+# training seeds 1000 and 1, on the main job's 60 demos (training seeds 0-59, as grid60), validation
+# grid_id 5000-5019; and lr 1e-3's 800-step checkpoint (a machine half as fast again).
+if want validation_quick_slow; then
+  X=outputs/exp
+  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
+    --workers=2 --resume=true
+  for run in "lr3e4_1600 3e-4 1000" "lr1e3_1600 1e-3 1000" "lr1e3_1600_seed1 1e-3 1"; do
+    set -- $run
+    [ -f $X/train_q_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
+      --policy.type=bbox_diffusion --policy.bbox_mode=mask --policy.mask_centroid=true --policy.device=cpu \
+      --policy.scheduler_warmup_steps=100 --policy.n_action_steps=12 --policy.use_amp=false \
+      --policy.image_size=64 --policy.n_obs_steps=1 --policy.optimizer_lr=$2 \
+      --dataset.repo_id=local/grid60 --dataset.root=$X/grid60 --output_dir=$X/train_q_$1 --steps=1600 \
+      --batch_size=8 --seed=$3 --num_workers=0 --save_freq=800 --log_freq=20 --wandb.enable=false
+    bboxpick-suite --policies=q_$1=$X/train_q_$1/checkpoints/last/pretrained_model --settings=grid_id \
+      --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_q_$1
+    publish $X/val_q_$1 validation_quick_slow_$1
+  done
+  bboxpick-suite --policies=q_lr1e3_800=$X/train_q_lr1e3_1600/checkpoints/000800/pretrained_model \
+    --settings=grid_id --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_q_lr1e3_800
+  publish $X/val_q_lr1e3_800 validation_quick_slow_lr1e3_800
+fi
+# The main job on that slow machine with the quick profile as changed there (lr 1e-3, no loader worker,
+# the budget sized from wall-clock seconds per step); the run before the change is main_job_avx2_0443d79.
+if want main_job_slow_machine; then
+  bash scripts/main.sh --out-dir outputs/main_job_slow_machine | tee outputs/main_job_slow_machine.console.txt
+  publish outputs/main_job_slow_machine/quick/suite main_job_slow_machine
+  cp outputs/main_job_slow_machine/quick/train/sizing.json docs/results/main_job_slow_machine/
+fi
 # A second training seed of the main job (same demos: the first run's data folder is copied, so only
 # lerobot-train's --seed differs).
 if want main_job_seed1; then
@@ -241,12 +272,19 @@ if want practical_b8_lateturn; then
   EXPERT_TURN=late variant_b8 practical_b8_lateturn $LATE_TURN 0.3 $FAST_INPUT
 fi
 if want practical_b8_lateturn_test; then variant_b8_test practical_b8_lateturn; fi
+# The paper protocol's input on the practical data (issue 14): 96 px and two observed frames, the input of
+# the only policy that picks turned targets (17 of 38 test scenes turned >= 15 deg, from grid demos alone),
+# on the practical recipe's 180 demos of every layout, trained as practical_b8.
+if want practical_b8_paperinput; then
+  variant_b8 practical_b8_paperinput $PRACTICAL 0.3 --policy.image_size=96 --policy.n_obs_steps=2
+fi
+if want practical_b8_paperinput_test; then variant_b8_test practical_b8_paperinput; fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
 # paper protocol's two-frame 96 px policy (grid demos only), the shipped checkpoint, the batch-8 variants.
 if want target_yaw; then
   runs="paper_protocol=docs/results/recipe_oracle@bbox_diffusion;shipped=docs/results/practical_oracle@practical"
   for name in practical_b8 practical_b8_crop practical_b8_norecovery practical_b8_rec06 practical_b8_seed1 \
-    practical_b8_lateturn \
+    practical_b8_lateturn practical_b8_paperinput \
     practical_b8_obs2; do
     [ -f docs/results/$name/episodes.jsonl ] && runs="$runs;$name=docs/results/$name"
   done

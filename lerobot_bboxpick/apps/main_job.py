@@ -76,13 +76,20 @@ class Profile:
     suite_settings: str = ",".join(SETTINGS)
     # lerobot-train's --seed (its default): another value repeats the recipe with a second training seed.
     train_seed: int = 1000
+    # lerobot-train's --num_workers. On 2 cores a loader worker competes with the update's two threads:
+    # on an AVX2-only EPYC in float32 the fast encoder's batch-8 step took 0.35-0.55 s with one worker
+    # (slowing as the run went on: a 9-minute budget took 13.4) and a steady 0.33 s loading in the main
+    # process (docs/benchmarks.md).
+    loader_workers: int = 1
 
 
 PROFILES = {
     # About 15 minutes on any machine of this kind: ~9 of them training, whatever the machine's rate, with
     # the fast encoder (twice the preset's samples/s) in batches of 8: in a fixed time, more updates of
     # fewer samples learn faster here (validation seeds: batch 8 x 2900 steps picked 16/20 on grid_id,
-    # batch 16 x 1900 13/20, batch 32 x 600 0/20; docs/results.md). Evaluated on the two layouts it trains on.
+    # batch 16 x 1900 13/20, batch 32 x 600 0/20; docs/results.md). A slow machine (AVX2 only, float32)
+    # fits ~1600 such steps in 9 minutes, where lr 1e-3 picked 18/20 and the default 3e-4 11/20 (validation
+    # seeds, docs/results.md). Evaluated on the two layouts it trains on.
     "quick": Profile(
         episodes=60,
         train_settings="grid_id,identical_4",
@@ -92,8 +99,9 @@ PROFILES = {
         warmup_steps=100,
         suite_episodes=10,
         videos=1,
-        policy_args=FAST_ENCODER,
+        policy_args=(*FAST_ENCODER, "--policy.optimizer_lr=1e-3"),
         suite_settings="grid_id,identical_4",
+        loader_workers=0,
     ),
     # The CPU recipe (docs/results.md): 5000 steps of batch 32 (160k samples), ~45 min at ~1.9 steps/s
     # with bf16 autocast on a 2-core CPU that has it natively, ~80 min in float32.
@@ -169,7 +177,7 @@ def train_command(
         f"--steps={steps}",
         f"--batch_size={profile.batch_size}",
         f"--seed={profile.train_seed}",
-        "--num_workers=1",
+        f"--num_workers={profile.loader_workers}",
         save_freq,
         f"--log_freq={LOG_FREQ}",
         "--wandb.enable=false",
@@ -185,12 +193,15 @@ def trained_steps(out: Path) -> int:
 def run_train(cmd: list[str], log: Path, start: int, total: int) -> float | None:
     """Run ``lerobot-train`` with its output in ``log`` and our progress bar on the console.
 
-    Returns the measured seconds per step (the mean of its logged update + data times), or None.
+    Returns the measured seconds per step, or None: the wall-clock time between its first and last log
+    lines per step in between (everything a step costs, the loader's contention included), or with a
+    single log line its logged update + data time.
     """
     print("+ " + shlex.join(cmd), flush=True)
     print(f"  lerobot-train's log: {log}", flush=True)
     log.parent.mkdir(parents=True, exist_ok=True)
     per_step: list[float] = []
+    marks: list[tuple[float, int]] = []  # (wall clock, steps done) at each log line
     with open(log, "a") as sink, tqdm(total=total, initial=start, desc="train", unit="step") as bar:
         proc = subprocess.Popen(
             cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=_env(), bufsize=1
@@ -205,8 +216,22 @@ def run_train(cmd: list[str], log: Path, start: int, total: int) -> float | None
                 step = _parse_count(logged) if logged.isdigit() else bar.n + LOG_FREQ
                 per_step.append(float(match.group(2)) + float(match.group(3)))
                 bar.update(max(0, step - bar.n))
+                marks.append((time.perf_counter(), bar.n))
         if proc.wait() != 0:
             raise subprocess.CalledProcessError(proc.returncode, cmd, output=f"see {log}")
+    return wall_seconds_per_step(marks) or _mean_steady(per_step)
+
+
+def wall_seconds_per_step(marks: list[tuple[float, int]]) -> float | None:
+    """Seconds per step between the first and the last ``(wall clock, steps done)`` mark, or None with
+    fewer than two. The first mark ends the warm-up (start-up, first batches), so it is the start."""
+    if len(marks) < 2 or marks[-1][1] <= marks[0][1]:
+        return None
+    (t0, s0), (t1, s1) = marks[0], marks[-1]
+    return (t1 - t0) / (s1 - s0)
+
+
+def _mean_steady(per_step: list[float]) -> float | None:
     # The first interval includes warm-up (first batches, allocator); later ones are the steady rate.
     steady = per_step[1:] or per_step
     return sum(steady) / len(steady) if steady else None
