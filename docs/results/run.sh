@@ -134,7 +134,7 @@ if want validation_quick_slow; then
     --settings=grid_id --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_q_lr1e3_800
   publish $X/val_q_lr1e3_800 validation_quick_slow_lr1e3_800
 fi
-# The main job on that slow machine with the quick profile as changed there (lr 1e-3, no loader worker,
+# The main job on that slow machine with the quick profile as changed there (no loader worker,
 # the budget sized from wall-clock seconds per step); the run before the change is main_job_avx2_0443d79.
 if want main_job_slow_machine; then
   bash scripts/main.sh --out-dir outputs/main_job_slow_machine | tee outputs/main_job_slow_machine.console.txt
