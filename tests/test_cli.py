@@ -3,6 +3,7 @@
 import csv
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -134,8 +135,9 @@ def test_calibration_rate_is_wall_clock_after_the_first_log_line():
 
 
 def test_quick_training_is_sized_by_its_time_budget_and_full_by_its_samples():
-    """Steps follow the measured rate: a 3x slower machine trains 3x fewer steps in the same minutes;
-    the recipe keeps its fixed sample budget on any machine."""
+    """Steps follow the measured rate: a 3x slower machine trains 3x fewer steps in the same minutes,
+    down to the quick profile's floor, which a slow machine trains to however long it takes; the recipe
+    keeps its fixed sample budget on any machine."""
     from lerobot_bboxpick.apps.main_job import (
         _STEP_LINE,
         CALIBRATION_STEPS,
@@ -145,11 +147,15 @@ def test_quick_training_is_sized_by_its_time_budget_and_full_by_its_samples():
     )
 
     quick = PROFILES["quick"]
-    fast, slow = budget_steps(quick, 0.3), budget_steps(quick, 0.9)
-    assert fast == int(quick.train_minutes * 60 / 0.3) < quick.steps
-    assert abs(fast / slow - 3.0) < 0.01
+    assert quick.min_steps == 2900
+    fast, slower = budget_steps(quick, 0.15), budget_steps(quick, 0.18)
+    assert fast == int(quick.train_minutes * 60 / 0.15) == 3600 < quick.steps
+    assert slower == 3000  # 1.2x slower, 1.2x fewer steps
     assert budget_steps(quick, 0.01) == quick.steps  # capped
-    assert budget_steps(quick, 1000.0) == CALIBRATION_STEPS  # never below the calibration itself
+    assert budget_steps(quick, 0.33) == budget_steps(quick, 1000.0) == 2900  # the floor: ~16 min at 0.33 s
+    unfloored = replace(quick, min_steps=0)
+    assert budget_steps(unfloored, 0.3) == 1800
+    assert budget_steps(unfloored, 1000.0) == CALIBRATION_STEPS  # never below the calibration itself
     assert (
         budget_steps(PROFILES["full"], 0.2) == budget_steps(PROFILES["full"], 2.0) == PROFILES["full"].steps
     )

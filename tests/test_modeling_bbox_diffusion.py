@@ -149,3 +149,46 @@ def test_one_observed_step_reads_the_frames_own_row_with_the_windowed_loss(tmp_p
     loss_a = policy.forward(a)[0]
     torch.manual_seed(5)
     assert torch.allclose(policy.forward(b)[0], loss_a)
+
+
+def test_ema_update_moves_each_weight_by_one_minus_decay_towards_the_model():
+    policy = _policy(use_ema=True, ema_power=0.75, ema_max_decay=0.9999)
+    with torch.no_grad():
+        for p in policy.model.parameters():
+            p.add_(1.0)  # the model 1.0 away from its EMA copy on every weight
+    before = [p.clone() for p in policy.ema_model.parameters()]
+    policy.update()
+    decay = 1 - 2**-0.75  # the first update: 1 - (1 + 1)^-power
+    for ema_before, ema_after, p in zip(
+        before, policy.ema_model.parameters(), policy.model.parameters(), strict=True
+    ):
+        expected = decay * ema_before + (1 - decay) * p
+        assert torch.allclose(ema_after, expected, atol=1e-6)
+    moved = [(a - b).abs().mean().item() for a, b in zip(policy.ema_model.parameters(), before, strict=True)]
+    assert min(moved) > 0.594 and max(moved) < 0.595  # 1 - decay = 2^-0.75 = 0.5946 of the 1.0 gap
+
+
+def test_optimizer_preset_is_fused_adamw_with_the_loop_implementations_steps():
+    """The preset's fused AdamW (a CPU speed-up) takes the same steps as torch's default AdamW."""
+    config = _policy().config
+    preset = config.get_optimizer_preset()
+    assert preset.type == "adamw_fused" and preset.lr == config.optimizer_lr
+    results = []
+    default_adamw = lambda groups: torch.optim.AdamW(groups, **_adamw_kwargs(preset))  # noqa: E731
+    for build, fused in ((preset.build, True), (default_adamw, None)):
+        policy = _policy().train()
+        optimizer = build(policy.get_optim_params())
+        assert optimizer.defaults["fused"] is fused
+        g = torch.Generator().manual_seed(3)
+        for _ in range(3):
+            for p in policy.parameters():
+                p.grad = torch.randn(p.shape, generator=g)
+            optimizer.step()
+        results.append(torch.cat([p.detach().flatten() for p in policy.parameters()]))
+    fused, loop = results
+    assert (fused - loop).abs().max().item() < 1e-6
+    assert (fused - torch.cat([p.detach().flatten() for p in _policy().parameters()])).abs().max() > 1e-4
+
+
+def _adamw_kwargs(preset) -> dict:
+    return {"lr": preset.lr, "betas": preset.betas, "eps": preset.eps, "weight_decay": preset.weight_decay}

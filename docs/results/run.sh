@@ -134,6 +134,34 @@ if want validation_quick_slow; then
     --settings=grid_id --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_q_lr1e3_800
   publish $X/val_q_lr1e3_800 validation_quick_slow_lr1e3_800
 fi
+# A cheaper step for the slow machine: the half-width UNet (32, 64, 128; 1.24x the model's batch-8 step
+# there) for the steps 9 minutes buy with it (~2000), two training seeds, grid_id validation seeds 5000-5019.
+if want validation_quick_half_unet; then
+  X=outputs/exp
+  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
+    --workers=2 --resume=true
+  for run in "half_2000 1000" "half_2000_seed1 1"; do
+    set -- $run
+    [ -f $X/train_q_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
+      --policy.type=bbox_diffusion --policy.bbox_mode=mask --policy.mask_centroid=true --policy.device=cpu \
+      --policy.scheduler_warmup_steps=100 --policy.n_action_steps=12 --policy.use_amp=false \
+      --policy.image_size=64 --policy.n_obs_steps=1 '--policy.down_dims=[32,64,128]' \
+      --dataset.repo_id=local/grid60 --dataset.root=$X/grid60 --output_dir=$X/train_q_$1 --steps=2000 \
+      --batch_size=8 --seed=$2 --num_workers=0 --save_freq=1000 --log_freq=20 --wandb.enable=false
+    bboxpick-suite --policies=q_$1=$X/train_q_$1/checkpoints/last/pretrained_model --settings=grid_id \
+      --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_q_$1
+    publish $X/val_q_$1 validation_quick_slow_$1
+  done
+fi
+# Re-planning more often as an evaluation-time lever for an under-trained policy: the three 1600-step
+# checkpoints above executing 8 of each 16-step chunk instead of 12, on the same validation scenes.
+if want validation_quick_slow_exec8; then
+  X=outputs/exp
+  bboxpick-suite --n_action_steps=8 --settings=grid_id --episodes=20 --seed_start=5000 --videos=0 \
+    --workers=2 --out_dir=$X/val_q_exec8 \
+    --policies=lr3e4_1600_exec8=$X/train_q_lr3e4_1600/checkpoints/last/pretrained_model,lr1e3_1600_seed1_exec8=$X/train_q_lr1e3_1600_seed1/checkpoints/last/pretrained_model,lr1e3_1600_exec8=$X/train_q_lr1e3_1600/checkpoints/last/pretrained_model
+  publish $X/val_q_exec8 validation_quick_slow_exec8
+fi
 # The main job on that slow machine with the quick profile as changed there (no loader worker,
 # the budget sized from wall-clock seconds per step); the run before the change is main_job_avx2_0443d79.
 if want main_job_slow_machine; then

@@ -13,13 +13,26 @@ in the dataclass (and so in ``--help``):
 from dataclasses import dataclass, field
 
 from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
-from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
+from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig, OptimizerConfig
 
 from lerobot_bboxpick.keys import BBOX, STATE
 
 BBOX_MODES = ("mask", "lowdim", "none")
 POSE_DIM = 10  # TCP pose10: position, rot6d, gripper width
 PACKED_STATE_DIM = POSE_DIM + 4  # the ur5 robot's observation.state: pose10 then the bbox
+
+
+@OptimizerConfig.register_subclass("adamw_fused")
+@dataclass
+class FusedAdamWConfig(AdamWConfig):
+    """LeRobot's AdamW with torch's fused kernel (``--optimizer.type=adamw_fused``).
+
+    On a CPU, torch.optim.AdamW defaults to a Python loop over the parameter tensors: for this policy's
+    180 tensors that is 63 ms of a ~0.3 s batch-8 step on a 2-core AVX2 CPU; the fused kernel takes
+    13 ms for the same update (docs/benchmarks.md). The parent's ``build`` passes ``fused`` on.
+    """
+
+    fused: bool = True
 
 
 @PreTrainedConfig.register_subclass("bbox_diffusion")
@@ -203,8 +216,8 @@ class BboxDiffusionConfig(PreTrainedConfig):
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
 
     def get_optimizer_preset(self) -> AdamWConfig:
-        """AdamW with UMI's settings."""
-        return AdamWConfig(
+        """AdamW with UMI's settings, fused."""
+        return FusedAdamWConfig(
             lr=self.optimizer_lr,
             betas=self.optimizer_betas,
             eps=self.optimizer_eps,
