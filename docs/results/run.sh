@@ -271,6 +271,17 @@ if want validation_ddim16; then
   bboxpick-compare --out=docs/results/validation_ddim_steps.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim4=$VAL_SHIPPED"
 fi
+# Eight and six steps on the same 180 validation scenes (2026-12-05): the fewest steps whose pooled Pick is
+# no lower than 16 steps' (118/180) with Wrong no higher (0) becomes the shipped config (rule in results.md).
+if want validation_ddim_fewer; then
+  for n in 8 6; do
+    bboxpick-suite --policies=shipped_ddim$n=examples/bbox_diffusion_lego_pick --num_inference_steps=$n \
+      --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_ddim$n
+    publish $X/val_ddim$n validation_ddim$n
+  done
+  bboxpick-compare --out=docs/results/validation_ddim_fewer.md \
+    --runs="ddim16=docs/results/validation_ddim16;ddim8=docs/results/validation_ddim8;ddim6=docs/results/validation_ddim6"
+fi
 # The practical recipe's data without recovery demos (the same 180 seeds, all plain expert demos), trained
 # as practical_b8: do the recovery segments cost the rotated-brick settings?
 if want practical_b8_norecovery; then variant_b8 practical_b8_norecovery $NO_RECOVERY 0 $FAST_INPUT; fi

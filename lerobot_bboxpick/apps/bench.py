@@ -325,6 +325,7 @@ INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
     "half-width UNet (32, 64, 128)": {"down_dims": (32, 64, 128)},
     "64 px, 1 observed frame": {"image_size": 64, "n_obs_steps": 1},
     "64 px, 1 frame, 8 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 8},
+    "64 px, 1 frame, 6 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 6},
     "64 px, 1 frame, 4 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 4},
     "64 px, 1 frame, 48 px target view, 4 DDIM steps": {
         "image_size": 64,
@@ -335,10 +336,11 @@ INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
 }
 
 
-def bench_inference_levers(chunks: int = 12, threads: int | None = None) -> str:
+def bench_inference_levers(chunks: int = 20, threads: int | None = None) -> str:
     """Markdown table: ms per predicted chunk (encoder + denoising, float32 as evaluation runs) of each
-    ``INFERENCE_LEVERS`` entry, timed in one run, with its ratio to the preset; ``threads`` sets torch's
-    thread count (None: torch's default)."""
+    ``INFERENCE_LEVERS`` entry with its ratio to the preset. The levers take turns chunk by chunk, so a
+    host whose speed drifts during the run (shared or throttled CPUs) moves every lever alike and the
+    ratios hold; ``threads`` sets torch's thread count (None: torch's default)."""
     import torch
 
     if threads is not None:
@@ -348,21 +350,21 @@ def bench_inference_levers(chunks: int = 12, threads: int | None = None) -> str:
         "observation.state": torch.rand(1, 10),
         "observation.bbox": torch.tensor([[0.4, 0.4, 0.5, 0.5]]),
     }
-    times = {}
-    for name, overrides in INFERENCE_LEVERS.items():
-        policy = _lever_policy(overrides).eval()
-        samples = []
-        with torch.no_grad():
-            for _ in range(chunks + 2):  # the first two trace and warm up the UNet
+    policies = {name: _lever_policy(overrides).eval() for name, overrides in INFERENCE_LEVERS.items()}
+    samples: dict[str, list[float]] = {name: [] for name in policies}
+    with torch.no_grad():
+        for round_ in range(chunks + 2):  # the first two rounds trace and warm up each UNet
+            for name, policy in policies.items():
                 policy.reset()
                 t0 = time.perf_counter()
                 policy.select_action(dict(obs))  # empty queue: a full chunk
-                samples.append(time.perf_counter() - t0)
-        times[name] = 1000 * float(np.median(samples[2:]))
+                if round_ >= 2:
+                    samples[name].append(time.perf_counter() - t0)
+    times = {name: 1000 * float(np.median(s)) for name, s in samples.items()}
     base = times[next(iter(INFERENCE_LEVERS))]
     lines = [
-        f"| inference lever (float32, {torch.get_num_threads()} torch threads) | ms per 16-step chunk "
-        "| ratio to the preset |",
+        f"| inference lever (float32, {torch.get_num_threads()} torch threads, median of {chunks} "
+        "interleaved chunks) | ms per 16-step chunk | ratio to the preset |",
         "|---|---|---|",
     ]
     lines += [f"| {name} | {ms:.1f} | {ms / base:.2f}x |" for name, ms in times.items()]
