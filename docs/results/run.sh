@@ -92,6 +92,17 @@ if want practical_oracle; then
   publish outputs/main/practical/suite_shipped practical_oracle
   cp outputs/main/practical/train/sizing.json docs/results/practical_oracle/
 fi
+# A second training seed of the practical recipe (issue 14: the spread between training seeds): the same
+# 180 demos (collection is deterministic in its seeds), only lerobot-train's --seed differs; its own suite
+# on the test seeds (the float32 EMA checkpoint), compared scene by scene with the shipped export's rows.
+if want practical_seed1; then
+  bash scripts/main.sh --profile practical --out-dir outputs/practical_seed1 --train-seed 1 \
+    | tee outputs/practical_seed1.console.txt
+  publish outputs/practical_seed1/practical/suite practical_seed1
+  cp outputs/practical_seed1/practical/train/sizing.json docs/results/practical_seed1/
+  bboxpick-compare --out=docs/results/practical_seed1.md \
+    --runs="seed1000=docs/results/practical_oracle@practical;seed1=docs/results/practical_seed1@bbox_diffusion"
+fi
 # The shipped checkpoint with the tracker's box (the first frame's oracle box, then the tracker).
 if want practical_tracked; then
   bboxpick-suite --policies=practical=examples/bbox_diffusion_lego_pick --bbox_source=tracked --episodes=30 \
