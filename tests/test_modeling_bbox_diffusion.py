@@ -1,5 +1,6 @@
 """The policy's sampling paths: the TorchScript-traced UNet must give the eager UNet's chunks."""
 
+import pytest
 import torch
 
 from lerobot_bboxpick.apps.bench import _policy_features
@@ -188,6 +189,24 @@ def test_optimizer_preset_is_fused_adamw_with_the_loop_implementations_steps():
     fused, loop = results
     assert (fused - loop).abs().max().item() < 1e-6
     assert (fused - torch.cat([p.detach().flatten() for p in _policy().parameters()])).abs().max() > 1e-4
+
+
+def test_timestep_spacing_picks_where_few_step_sampling_starts():
+    """ "trailing" starts at the last training timestep whatever the step count; "leading" (the default,
+    every published table) starts lower the fewer the steps; an unknown spacing names the field."""
+    visited = {}
+    for spacing in ("leading", "trailing"):
+        policy = _policy(n_obs_steps=2, num_inference_steps=4, timestep_spacing=spacing)
+        chunk = _chunk(policy, _batch(1))
+        visited[spacing] = (policy.ema_model.noise_scheduler.timesteps.tolist(), chunk)
+    assert visited["leading"][0] == [36, 24, 12, 0]
+    assert visited["trailing"][0] == [49, 37, 24, 11]
+    # Same weights and noise, a different path: the chunks differ (mm-scale positions, not rounding).
+    assert (visited["leading"][1] - visited["trailing"][1]).abs().max().item() > 1e-3
+    assert BboxDiffusionConfig().timestep_spacing == "leading"
+    allowed = "timestep_spacing='cosine' is not one of leading, trailing, linspace"
+    with pytest.raises(ValueError, match=allowed):
+        BboxDiffusionConfig(timestep_spacing="cosine")
 
 
 def _adamw_kwargs(preset) -> dict:

@@ -293,6 +293,23 @@ if want validation_ddim_fewer; then
   bboxpick-compare --out=docs/results/validation_ddim_fewer.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim8=docs/results/validation_ddim8;ddim6=docs/results/validation_ddim6"
 fi
+# Trailing timestep spacing (issue 14's speed goal): DDIM's default "leading" spacing starts a 4-step
+# chunk at t = 36 of 50, where the model expects 39% signal in pure noise; "trailing" starts at t = 49
+# whatever the step count. The shipped weights with --policy.timestep_spacing=trailing (a copy whose
+# config.json says so) at 4 and 6 steps, on the same 180 validation scenes.
+if want validation_ddim_trailing; then
+  for n in 4 6; do
+    T=$X/shipped_trailing
+    mkdir -p $T && cp examples/bbox_diffusion_lego_pick/*.json examples/bbox_diffusion_lego_pick/*.safetensors $T/
+    python -c "import json,sys; p=sys.argv[1]; c=json.load(open(p)); c['timestep_spacing']='trailing'; \
+json.dump(c, open(p, 'w'), indent=4)" $T/config.json
+    bboxpick-suite --policies=shipped_trailing$n=$T --num_inference_steps=$n \
+      --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_trailing$n
+    publish $X/val_trailing$n validation_trailing$n
+  done
+  bboxpick-compare --out=docs/results/validation_ddim_trailing.md \
+    --runs="ddim16=docs/results/validation_ddim16;trailing4=docs/results/validation_trailing4;trailing6=docs/results/validation_trailing6"
+fi
 # The practical recipe's data without recovery demos (the same 180 seeds, all plain expert demos), trained
 # as practical_b8: do the recovery segments cost the rotated-brick settings?
 if want practical_b8_norecovery; then variant_b8 practical_b8_norecovery $NO_RECOVERY 0 $FAST_INPUT; fi

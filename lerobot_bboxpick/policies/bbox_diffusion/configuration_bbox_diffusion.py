@@ -18,6 +18,7 @@ from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig, OptimizerConfig
 from lerobot_bboxpick.keys import BBOX, STATE
 
 BBOX_MODES = ("mask", "lowdim", "none")
+TIMESTEP_SPACINGS = ("leading", "trailing", "linspace")  # diffusers DDIMScheduler's options
 POSE_DIM = 10  # TCP pose10: position, rot6d, gripper width
 PACKED_STATE_DIM = POSE_DIM + 4  # the ur5 robot's observation.state: pose10 then the bbox
 
@@ -109,6 +110,12 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # Noise schedule (UMI: DDIM, 50 train steps, squaredcos_cap_v2, epsilon, clip_sample).
     num_train_timesteps: int = 50
     num_inference_steps: int = 16
+    # Which num_inference_steps of the num_train_timesteps DDIM visits (diffusers' DDIMScheduler option).
+    # "leading" (the default, what every published table used) starts at (T // n) * (n - 1): at 4 of 50
+    # steps, t = 36, where the model expects 39% signal in what is pure noise; "trailing" and "linspace"
+    # start at t = T - 1 whatever n, so few-step sampling starts where training's noise ends
+    # (Lin et al. 2023, "Common Diffusion Noise Schedules and Sample Steps are Flawed", table 2).
+    timestep_spacing: str = "leading"
     beta_schedule: str = "squaredcos_cap_v2"
     beta_start: float = 0.0001
     beta_end: float = 0.02
@@ -185,6 +192,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon={self.horizon}]")
         if self.prediction_type not in ("epsilon", "sample"):
             raise ValueError(f"prediction_type={self.prediction_type!r} must be 'epsilon' or 'sample'")
+        if self.timestep_spacing not in TIMESTEP_SPACINGS:
+            raise ValueError(
+                f"timestep_spacing={self.timestep_spacing!r} is not one of {', '.join(TIMESTEP_SPACINGS)}"
+            )
         for name in ("camera_latency_s", "action_latency_s"):
             if not 0.0 <= getattr(self, name) < 10.0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be in [0, 10) seconds")

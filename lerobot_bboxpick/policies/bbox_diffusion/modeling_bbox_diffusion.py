@@ -159,6 +159,7 @@ class BboxDiffusionModel(nn.Module):
             set_alpha_to_one=True,
             steps_offset=0,
             prediction_type=config.prediction_type,
+            timestep_spacing=config.timestep_spacing,
         )
         # TorchScript traces of the UNet by (device, dtype, batch), built on first use (see _denoiser).
         # A plain dict, not a submodule: nothing extra in the state dict.
