@@ -297,18 +297,30 @@ fi
 # chunk at t = 36 of 50, where the model expects 39% signal in pure noise; "trailing" starts at t = 49
 # whatever the step count. The shipped weights with --policy.timestep_spacing=trailing (a copy whose
 # config.json says so) at 4 and 6 steps, on the same 180 validation scenes.
+spaced_copy() {  # spaced_copy <spacing>: the shipped checkpoint in $X/shipped_<spacing>, its config set so
+  local T=$X/shipped_$1
+  mkdir -p $T && cp examples/bbox_diffusion_lego_pick/*.json examples/bbox_diffusion_lego_pick/*.safetensors $T/
+  python -c "import json,sys; p=sys.argv[1]; c=json.load(open(p)); c['timestep_spacing']=sys.argv[2]; \
+json.dump(c, open(p, 'w'), indent=4)" $T/config.json $1
+}
 if want validation_ddim_trailing; then
+  spaced_copy trailing
   for n in 4 6; do
-    T=$X/shipped_trailing
-    mkdir -p $T && cp examples/bbox_diffusion_lego_pick/*.json examples/bbox_diffusion_lego_pick/*.safetensors $T/
-    python -c "import json,sys; p=sys.argv[1]; c=json.load(open(p)); c['timestep_spacing']='trailing'; \
-json.dump(c, open(p, 'w'), indent=4)" $T/config.json
-    bboxpick-suite --policies=shipped_trailing$n=$T --num_inference_steps=$n \
+    bboxpick-suite --policies=shipped_trailing$n=$X/shipped_trailing --num_inference_steps=$n \
       --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_trailing$n
     publish $X/val_trailing$n validation_trailing$n
   done
   bboxpick-compare --out=docs/results/validation_ddim_trailing.md \
     --runs="ddim16=docs/results/validation_ddim16;trailing4=docs/results/validation_trailing4;trailing6=docs/results/validation_trailing6"
+fi
+# Linspace spacing (49 ... 0): trailing's start at t = 49 and leading's last call at t = 0; 4 steps.
+if want validation_ddim_linspace; then
+  spaced_copy linspace
+  bboxpick-suite --policies=shipped_linspace4=$X/shipped_linspace --num_inference_steps=4 \
+    --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_linspace4
+  publish $X/val_linspace4 validation_linspace4
+  bboxpick-compare --out=docs/results/validation_ddim_linspace.md \
+    --runs="ddim16=docs/results/validation_ddim16;linspace4=docs/results/validation_linspace4"
 fi
 # The practical recipe's data without recovery demos (the same 180 seeds, all plain expert demos), trained
 # as practical_b8: do the recovery segments cost the rotated-brick settings?
