@@ -11,12 +11,29 @@ publish() {  # publish <suite out_dir> <docs name>
   cp "$1"/table.md "$1"/table.csv "$1"/episodes.jsonl "$1"/outcomes.png "docs/results/$2/"
 }
 want() { [ -z "${STEP:-}" ] || [ "${STEP}" = "$1" ]; }
+# second_seed <profile> <name> <the seed-1000 rows>: the recipe again on the same demos (collection is
+# deterministic in its seeds) with only lerobot-train's --seed changed (issue 14: two training seeds per
+# recipe); its suite on the test seeds (the float32 EMA checkpoint), compared scene by scene.
+second_seed() {
+  bash scripts/main.sh --profile $1 --out-dir outputs/$2 --train-seed 1 | tee outputs/$2.console.txt
+  publish outputs/$2/$1/suite $2
+  cp outputs/$2/$1/train/sizing.json docs/results/$2/
+  bboxpick-compare --out=docs/results/$2.md --runs="seed1000=$3;seed1=docs/results/$2@bbox_diffusion"
+}
+tracked_suite() {  # tracked_suite <profile> <name>: second_seed's checkpoint with the tracker's box
+  bboxpick-suite --policies=bbox_diffusion=outputs/$2/$1/train/checkpoints/last/pretrained_model \
+    --bbox_source=tracked --episodes=30 --videos=1 --out_dir=outputs/$2/$1/suite_tracked
+  publish outputs/$2/$1/suite_tracked $2_tracked
+}
 
 # The CPU recipe: collect 200 demos, train 5000 steps, suite on test seeds with the oracle box.
 if want recipe_oracle; then
   bash examples/train_cpu_90min.sh
   publish $FULL/suite recipe_oracle
 fi
+# The paper-protocol recipe's second training seed, with the oracle box and then the tracker's box.
+if want recipe_seed1; then second_seed full recipe_seed1 docs/results/recipe_oracle@bbox_diffusion; fi
+if want recipe_seed1_tracked; then tracked_suite full recipe_seed1; fi
 # The same checkpoint and test scenes with a person's box (IoU 0.7) and with the tracker's box.
 if want recipe_noisy; then
   bboxpick-suite --policies=bbox_diffusion=$CKPT --bbox_source=noisy --noisy_iou=0.7 --episodes=30 \
@@ -92,17 +109,9 @@ if want practical_oracle; then
   publish outputs/main/practical/suite_shipped practical_oracle
   cp outputs/main/practical/train/sizing.json docs/results/practical_oracle/
 fi
-# A second training seed of the practical recipe (issue 14: the spread between training seeds): the same
-# 180 demos (collection is deterministic in its seeds), only lerobot-train's --seed differs; its own suite
-# on the test seeds (the float32 EMA checkpoint), compared scene by scene with the shipped export's rows.
-if want practical_seed1; then
-  bash scripts/main.sh --profile practical --out-dir outputs/practical_seed1 --train-seed 1 \
-    | tee outputs/practical_seed1.console.txt
-  publish outputs/practical_seed1/practical/suite practical_seed1
-  cp outputs/practical_seed1/practical/train/sizing.json docs/results/practical_seed1/
-  bboxpick-compare --out=docs/results/practical_seed1.md \
-    --runs="seed1000=docs/results/practical_oracle@practical;seed1=docs/results/practical_seed1@bbox_diffusion"
-fi
+# The practical recipe's second training seed (compared with the shipped export's rows), oracle then tracked box.
+if want practical_seed1; then second_seed practical practical_seed1 docs/results/practical_oracle@practical; fi
+if want practical_seed1_tracked; then tracked_suite practical practical_seed1; fi
 # The shipped checkpoint with the tracker's box (the first frame's oracle box, then the tracker).
 if want practical_tracked; then
   bboxpick-suite --policies=practical=examples/bbox_diffusion_lego_pick --bbox_source=tracked --episodes=30 \

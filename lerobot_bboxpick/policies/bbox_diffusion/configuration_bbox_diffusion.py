@@ -114,7 +114,7 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # "leading" (the default, what every published table used) starts at (T // n) * (n - 1): at 4 of 50
     # steps, t = 36, where the model expects 39% signal in what is pure noise; "trailing" and "linspace"
     # start at t = T - 1 whatever n (Lin et al. 2023, "Common Diffusion Noise Schedules and Sample Steps
-    # are Flawed", table 2). For the shipped checkpoint trailing picked fewer, not more (docs/results.md).
+    # are Flawed", table 2). For the shipped checkpoint both picked fewer, not more (docs/results.md).
     timestep_spacing: str = "leading"
     beta_schedule: str = "squaredcos_cap_v2"
     beta_start: float = 0.0001
