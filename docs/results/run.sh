@@ -20,10 +20,10 @@ second_seed() {
   cp outputs/$2/$1/train/sizing.json docs/results/$2/
   bboxpick-compare --out=docs/results/$2.md --runs="seed1000=$3;seed1=docs/results/$2@bbox_diffusion"
 }
-tracked_suite() {  # tracked_suite <profile> <name>: second_seed's checkpoint with the tracker's box
-  bboxpick-suite --policies=bbox_diffusion=outputs/$2/$1/train/checkpoints/last/pretrained_model \
-    --bbox_source=tracked --episodes=30 --videos=1 --out_dir=outputs/$2/$1/suite_tracked
-  publish outputs/$2/$1/suite_tracked $2_tracked
+tracked_suite() {  # tracked_suite <run dir> <docs name>: the run's last checkpoint with the tracker's box
+  bboxpick-suite --policies=bbox_diffusion=$1/train/checkpoints/last/pretrained_model \
+    --bbox_source=tracked --episodes=30 --videos=1 --out_dir=$1/suite_tracked
+  publish $1/suite_tracked $2
 }
 
 # The CPU recipe: collect 200 demos, train 5000 steps, suite on test seeds with the oracle box.
@@ -33,18 +33,14 @@ if want recipe_oracle; then
 fi
 # The paper-protocol recipe's second training seed, with the oracle box and then the tracker's box.
 if want recipe_seed1; then second_seed full recipe_seed1 docs/results/recipe_oracle@bbox_diffusion; fi
-if want recipe_seed1_tracked; then tracked_suite full recipe_seed1; fi
+if want recipe_seed1_tracked; then tracked_suite outputs/recipe_seed1/full recipe_seed1_tracked; fi
 # The same checkpoint and test scenes with a person's box (IoU 0.7) and with the tracker's box.
 if want recipe_noisy; then
   bboxpick-suite --policies=bbox_diffusion=$CKPT --bbox_source=noisy --noisy_iou=0.7 --episodes=30 \
     --videos=1 --out_dir=$FULL/suite_noisy
   publish $FULL/suite_noisy recipe_noisy
 fi
-if want recipe_tracked; then
-  bboxpick-suite --policies=bbox_diffusion=$CKPT --bbox_source=tracked --episodes=30 --videos=1 \
-    --out_dir=$FULL/suite_tracked
-  publish $FULL/suite_tracked recipe_tracked
-fi
+if want recipe_tracked; then tracked_suite $FULL recipe_tracked; fi
 # The recipe's choices re-checked on validation seeds 5000-5009: executed steps per chunk, and the
 # training length (the saved checkpoints at 3000, 4000 and 5000 steps).
 if want validation_n_action_steps; then
@@ -111,7 +107,7 @@ if want practical_oracle; then
 fi
 # The practical recipe's second training seed (compared with the shipped export's rows), oracle then tracked box.
 if want practical_seed1; then second_seed practical practical_seed1 docs/results/practical_oracle@practical; fi
-if want practical_seed1_tracked; then tracked_suite practical practical_seed1; fi
+if want practical_seed1_tracked; then tracked_suite outputs/practical_seed1/practical practical_seed1_tracked; fi
 # The shipped checkpoint with the tracker's box (the first frame's oracle box, then the tracker).
 if want practical_tracked; then
   bboxpick-suite --policies=practical=examples/bbox_diffusion_lego_pick --bbox_source=tracked --episodes=30 \
