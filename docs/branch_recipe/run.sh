@@ -49,9 +49,14 @@ finetune() {  # name, extra lerobot-train arguments...
         --wandb.enable=false "$@" > "$OUT/$name.log" 2>&1
 }
 if want finetune; then
-    finetune succ_bc
-    finetune awr_t01 --policy.awr_advantages_path=$OUT/advantages.json --policy.awr_temperature=0.1 \
-        --policy.anchor_policy_path=$CKPT
+    for name in ${FINETUNES:-succ_bc awr_t01}; do
+        case $name in
+            succ_bc) finetune succ_bc ;;
+            awr_t01) finetune awr_t01 --policy.awr_advantages_path=$OUT/advantages.json \
+                --policy.awr_temperature=0.1 --policy.anchor_policy_path=$CKPT ;;
+            succ_bc_s1) finetune succ_bc_s1 --seed=1 ;;  # the chosen method's second training seed
+        esac
+    done
 fi
 
 # 4-5. Suites with the oracle box; bboxpick-compare pairs each policy's scenes with IL's.
@@ -64,18 +69,22 @@ suite() {  # split, name, checkpoint, bboxpick-suite arguments...
 }
 VAL=(--settings=grid_ood,random_id --seed_start=5000)
 if want val; then
-    suite val IL $CKPT "${VAL[@]}"
-    for name in succ_bc awr_t01; do suite val $name $OUT/$name/checkpoints/last/pretrained_model "${VAL[@]}"; done
+    [[ -f $DOCS/val/IL/episodes.jsonl ]] || suite val IL $CKPT "${VAL[@]}"
+    for name in ${VAL_POLICIES:-succ_bc awr_t01}; do
+        suite val $name $OUT/$name/checkpoints/last/pretrained_model "${VAL[@]}"
+    done
 fi
 if want val || want table; then
-    bboxpick-compare --runs="IL=$DOCS/val/IL;succ_bc=$DOCS/val/succ_bc;awr_t01=$DOCS/val/awr_t01" \
-        --out=$DOCS/val_table.md
+    runs="IL=$DOCS/val/IL"
+    for name in $(ls $DOCS/val | grep -v '^IL$'); do runs="$runs;$name=$DOCS/val/$name"; done
+    bboxpick-compare --runs="$runs" --out=$DOCS/val_table.md
 fi
 # Test seeds 10000-10029, all six settings; IL's rows are docs/results/recipe_seed1's (the same checkpoint,
 # seeds, settings and steps).
 if want test; then
     for name in ${TEST_POLICIES:-succ_bc awr_t01}; do
-        suite test $name $OUT/$name/checkpoints/last/pretrained_model --seed_start=10000
+        [[ -f $DOCS/test/$name/episodes.jsonl ]] ||
+            suite test $name $OUT/$name/checkpoints/last/pretrained_model --seed_start=10000
     done
 fi
 if want test || want table; then
