@@ -38,15 +38,8 @@ fi
 
 # 3. Fine-tunes from the shipped checkpoint, docs/offline_rl's settings: 600 steps of batch 32, AdamW 1e-4
 #    with 50 warm-up steps, EMA, float32.
-finetune() {  # name, extra lerobot-train arguments...
-    local name=$1; shift
-    [[ -f $OUT/$name/checkpoints/last/pretrained_model/model.safetensors ]] && return
-    rm -rf "$OUT/$name"
-    lerobot-train --policy.path=$CKPT --policy.use_amp=false --policy.use_ema=true --policy.optimizer_lr=1e-4 \
-        --policy.scheduler_warmup_steps=50 --dataset.repo_id=local/branch_awr --dataset.root=$TRAIN \
-        --output_dir=$OUT/$name --steps=600 --batch_size=32 --num_workers=1 --save_freq=600 --log_freq=50 \
-        --wandb.enable=false "$@" > "$OUT/$name.log" 2>&1
-}
+source docs/finetune.sh
+finetune() { finetune_from $CKPT local/branch_awr $TRAIN $OUT "$@"; }  # name, extra lerobot-train arguments...
 if want finetune; then
     mkdir -p $OUT
     AWR_T01=(--policy.awr_advantages_path=$OUT/advantages.json --policy.awr_temperature=0.1
