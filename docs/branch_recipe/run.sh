@@ -5,7 +5,7 @@
 # The goal settings are grid_ood and random_id, where this IL policy picks 37% and 53% of test scenes.
 # Choice on validation seeds 5000-5029, then test seeds 10000-10029. Every policy runs the checkpoint's
 # own 16 DDIM steps, as the IL test rows did. Run from the repository root; STEP=<name> runs one step
-# (data, merge, finetune, val, test, table).
+# (data, merge, dagger, finetune, val, test, table).
 set -euo pipefail
 source scripts/setup.sh
 RUN=outputs/recipe_seed1/full  # STEP=recipe_seed1 of docs/results/run.sh
@@ -37,6 +37,23 @@ if want merge; then
     cp $CF/summary.md $DOCS/branch_summary.md
 fi
 
+# 2b. Recovery labels where the branches have none: the IL policy drives on training seeds 4000+ of the goal
+#     settings, the scripted expert takes over in place where docs/dagger's intervention rule sees the pick
+#     going wrong (off the grasp when low, closing high, 8 s without a pick), and 20 corrections per setting
+#     join the branch training set (succ_dagger) or the IL demos alone (dagger_only, the control).
+if want dagger; then
+    [[ -d $OUT/dagger_corr ]] || bboxpick-dagger --policy_path=$CKPT --repo_id=local/dagger_corr \
+        --root=$OUT/dagger_corr --settings=grid_ood,random_id --episodes=20 --seed_start=4000 \
+        --num_inference_steps=16 --workers=2 --correction=in_place
+    for pair in "succ_dagger:$TRAIN:local/branch_recipe" "dagger_only:$RUN/data:local/lego_pick_full"; do
+        IFS=: read -r name base base_id <<< "$pair"
+        [[ -d $OUT/${name}_data ]] || lerobot-edit-dataset --new_repo_id=local/${name}_data \
+            --new_root=$OUT/${name}_data --operation.type=merge \
+            --operation.repo_ids="['$base_id', 'local/dagger_corr']" \
+            --operation.roots="['$base', '$OUT/dagger_corr']" > $OUT/${name}.merge.log 2>&1
+    done
+fi
+
 # 3. Fine-tunes from the IL checkpoint with docs/branch_awr's settings: 600 steps of batch 32, AdamW 1e-4
 #    with 50 warm-up steps, EMA, float32.
 source docs/finetune.sh
@@ -48,6 +65,7 @@ if want finetune; then
             awr_t01) finetune awr_t01 --policy.awr_advantages_path=$OUT/advantages.json \
                 --policy.awr_temperature=0.1 --policy.anchor_policy_path=$CKPT ;;
             succ_bc_s1) finetune succ_bc_s1 --seed=1 ;;  # the chosen method's second training seed
+            succ_dagger | dagger_only) finetune_from $CKPT local/${name}_data $OUT/${name}_data $OUT $name ;;
         esac
     done
 fi

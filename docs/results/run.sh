@@ -327,6 +327,24 @@ if want validation_ddim_linspace; then
   bboxpick-compare --out=docs/results/validation_ddim_linspace.md \
     --runs="ddim16=docs/results/validation_ddim16;linspace4=docs/results/validation_linspace4"
 fi
+# A half-width UNet (32, 64, 128) trained exactly as the shipped checkpoint (the practical recipe's 180 demos,
+# made by STEP=practical_seed1; 5000 steps of batch 32, bf16 autocast, seed 1000): a cheaper call per
+# denoising step. Validation rows at 12 DDIM steps (0.47x the preset's chunk by the idle 2026-12-06 bench's
+# per-call costs), beside the shipped checkpoint at its 16 (rule in results.md, "Half-width UNet").
+if want practical_halfwidth; then
+  [ -f $X/train_halfwidth/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
+    --policy.type=bbox_diffusion --policy.bbox_mode=mask --policy.mask_centroid=true --policy.device=cpu \
+    --policy.scheduler_warmup_steps=300 --policy.n_action_steps=12 --policy.use_amp=true \
+    --policy.image_size=64 --policy.n_obs_steps=1 --policy.down_dims="[32,64,128]" \
+    --dataset.repo_id=local/lego_pick_practical --dataset.root=outputs/practical_seed1/practical/data \
+    --output_dir=$X/train_halfwidth --steps=5000 --batch_size=32 --seed=1000 --num_workers=1 \
+    --save_freq=1000 --log_freq=50 --wandb.enable=false > $X/train_halfwidth.log 2>&1
+  bboxpick-suite --policies=halfwidth12=$X/train_halfwidth/checkpoints/last/pretrained_model \
+    --num_inference_steps=12 --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_halfwidth12
+  publish $X/val_halfwidth12 validation_halfwidth12
+  bboxpick-compare --out=docs/results/validation_halfwidth.md \
+    --runs="ddim16=docs/results/validation_ddim16;halfwidth12=docs/results/validation_halfwidth12"
+fi
 # The practical recipe's data without recovery demos (the same 180 seeds, all plain expert demos), trained
 # as practical_b8: do the recovery segments cost the rotated-brick settings?
 if want practical_b8_norecovery; then variant_b8 practical_b8_norecovery $NO_RECOVERY 0 $FAST_INPUT; fi

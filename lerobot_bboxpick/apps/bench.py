@@ -327,6 +327,23 @@ INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
     "64 px, 1 frame, 8 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 8},
     "64 px, 1 frame, 6 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 6},
     "64 px, 1 frame, 4 DDIM steps": {"image_size": 64, "n_obs_steps": 1, "num_inference_steps": 4},
+    "64 px, 1 frame, half-width UNet, 16 DDIM steps": {
+        "image_size": 64,
+        "n_obs_steps": 1,
+        "down_dims": (32, 64, 128),
+    },
+    "64 px, 1 frame, half-width UNet, 12 DDIM steps": {
+        "image_size": 64,
+        "n_obs_steps": 1,
+        "down_dims": (32, 64, 128),
+        "num_inference_steps": 12,
+    },
+    "64 px, 1 frame, half-width UNet, 8 DDIM steps": {
+        "image_size": 64,
+        "n_obs_steps": 1,
+        "down_dims": (32, 64, 128),
+        "num_inference_steps": 8,
+    },
     "64 px, 1 frame, 48 px target view, 4 DDIM steps": {
         "image_size": 64,
         "n_obs_steps": 1,

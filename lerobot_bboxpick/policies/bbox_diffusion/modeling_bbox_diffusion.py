@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 from diffusers.schedulers.scheduling_ddim import DDIMScheduler
+from diffusers.schedulers.scheduling_dpmsolver_multistep import DPMSolverMultistepScheduler
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionConditionalUnet1d
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.policies.utils import populate_queues
@@ -133,6 +134,23 @@ def image_feature_dim(module: nn.Module) -> int:
     return module.encoder.out_dim + (module.target_view.out_dim if module.target_view is not None else 0)
 
 
+def sampling_scheduler(config: BboxDiffusionConfig, ddim: DDIMScheduler) -> DDIMScheduler:
+    """The scheduler ``sample`` steps with (``config.sampler``): ``ddim`` itself, or DPM-Solver++ on the
+    same noise schedule, whose per-chunk history ``set_timesteps`` clears."""
+    if config.sampler == "ddim":
+        return ddim
+    return DPMSolverMultistepScheduler(
+        num_train_timesteps=config.num_train_timesteps,
+        beta_start=config.beta_start,
+        beta_end=config.beta_end,
+        beta_schedule=config.beta_schedule,
+        prediction_type=config.prediction_type,
+        algorithm_type="dpmsolver++",
+        solver_order=2,
+        lower_order_final=True,  # first order on the last step: stable at few steps (diffusers' advice)
+    )
+
+
 class BboxDiffusionModel(nn.Module):
     """Observation encoder (+ target view) + conditional UNet + DDIM scheduler."""
 
@@ -161,6 +179,7 @@ class BboxDiffusionModel(nn.Module):
             prediction_type=config.prediction_type,
             timestep_spacing=config.timestep_spacing,
         )
+        self.sampling_scheduler = sampling_scheduler(config, self.noise_scheduler)
         # TorchScript traces of the UNet by (device, dtype, batch), built on first use (see _denoiser).
         # A plain dict, not a submodule: nothing extra in the state dict.
         self._traced_unets: dict[tuple, torch.jit.ScriptModule] = {}
@@ -290,15 +309,23 @@ class BboxDiffusionModel(nn.Module):
             device=cond.device,
             dtype=cond.dtype,
         )
+        scheduler = self.sampling_scheduler
         self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
+        if scheduler is not self.noise_scheduler:  # at DDIM's timesteps (timestep_spacing); clears history
+            scheduler.set_timesteps(timesteps=self.noise_scheduler.timesteps.tolist())
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
         unet = self._denoiser(sample, timestep, cond)  # chosen (and traced if new) once per chunk
-        for t in self.noise_scheduler.timesteps:
+        # DDIM clips its own x0 estimate; the multistep solvers have no such option, so a predicted clean
+        # chunk is clipped here, the same bound on the data the model was trained on.
+        clip_x0 = scheduler is not self.noise_scheduler and self.config.clip_sample
+        for t in scheduler.timesteps:
             timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
             output = unet(sample, timestep, cond)
             if guide is not None:
                 output = output + guide(output)
-            sample = self.noise_scheduler.step(output, t, sample, generator=generator).prev_sample
+            if clip_x0 and self.config.prediction_type == "sample":
+                output = output.clamp(-self.config.clip_sample_range, self.config.clip_sample_range)
+            sample = scheduler.step(output, t, sample, generator=generator).prev_sample
         return self.action_scaler.inverse(sample)
 
 
