@@ -5,11 +5,14 @@ The shipped checkpoint drives eight validation episodes (seeds 5000-5001 of four
 noise draws by each sampler at 4, 6, 8 and 16 calls, and by DDIM at 50 calls from the same noise (the
 converged chunk); the table gives the position error of the executed steps in mm.
 
-From the repository root (about 2 minutes on an idle 2-core machine):
+From the repository root (about 10 minutes on a 2-core machine running a training beside it):
 ``python -m lerobot_bboxpick.eval.sampler_error > docs/benchmarks/sampler_error.md``
 """
 
 from __future__ import annotations
+
+import contextlib
+import sys
 
 import numpy as np
 import torch
@@ -63,7 +66,8 @@ def error_mm(positions: np.ndarray, converged: np.ndarray) -> np.ndarray:
 def main() -> None:
     """Print the markdown table of the module docstring."""
     torch.set_num_threads(1)
-    runner = PolicyRunner.from_pretrained(SHIPPED_CHECKPOINT)
+    with contextlib.redirect_stdout(sys.stderr):  # LeRobot's loader prints; stdout is the table
+        runner = PolicyRunner.from_pretrained(SHIPPED_CHECKPOINT)
     batches = chunk_observations(runner)
     converged = chunk_positions(runner, batches, "ddim", 50)
     print(f"{len(batches)} chunk observations x {DRAWS} noise draws; error against 50-step DDIM, mm\n")
