@@ -45,7 +45,8 @@ def chunk_observations(runner: PolicyRunner) -> list[dict]:
 
 def chunk_positions(runner: PolicyRunner, batches: list[dict], sampler: str, steps: int) -> np.ndarray:
     """(observations, DRAWS, n_action_steps, 3) executed chunk positions in metres, sampled by ``sampler``
-    in ``steps`` UNet calls; the same noise for every sampler and step count."""
+    in ``steps`` UNet calls (set on the runner's policy, which keeps them); the same noise for every
+    sampler and step count."""
     policy = runner.policy
     policy.config.sampler, policy.config.num_inference_steps = sampler, steps
     model = policy._inference_model()

@@ -121,7 +121,7 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # is at t = 0 too); training is the same for both. "ddim" is first order (every published table);
     # "dpmsolver++" (Lu et al. 2022, 2M) is a second-order multistep solver reusing the previous call's
     # prediction: one UNet call per step as DDIM. For the shipped checkpoint it lands further from the
-    # converged chunk than DDIM at 6 and 8 calls (docs/benchmarks.md), so "ddim" stays the default.
+    # converged chunk than DDIM on average at 4-8 calls (docs/benchmarks.md), so "ddim" stays the default.
     sampler: str = "ddim"
     beta_schedule: str = "squaredcos_cap_v2"
     beta_start: float = 0.0001

@@ -134,7 +134,9 @@ def image_feature_dim(module: nn.Module) -> int:
     return module.encoder.out_dim + (module.target_view.out_dim if module.target_view is not None else 0)
 
 
-def sampling_scheduler(config: BboxDiffusionConfig, ddim: DDIMScheduler) -> DDIMScheduler:
+def sampling_scheduler(
+    config: BboxDiffusionConfig, ddim: DDIMScheduler
+) -> DDIMScheduler | DPMSolverMultistepScheduler:
     """The scheduler ``sample`` steps with (``config.sampler``): ``ddim`` itself, or DPM-Solver++ on the
     same noise schedule, whose per-chunk history ``set_timesteps`` clears."""
     if config.sampler == "ddim":
@@ -315,7 +317,7 @@ class BboxDiffusionModel(nn.Module):
             scheduler.set_timesteps(timesteps=self.noise_scheduler.timesteps.tolist())
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
         unet = self._denoiser(sample, timestep, cond)  # chosen (and traced if new) once per chunk
-        # DDIM clips its own x0 estimate; the multistep solvers have no such option, so a predicted clean
+        # DDIM clips its own x0 estimate; DPM-Solver++ has no such option, so a predicted clean
         # chunk is clipped here, the same bound on the data the model was trained on.
         clip_x0 = scheduler is not self.noise_scheduler and self.config.clip_sample
         for t in scheduler.timesteps:
