@@ -100,6 +100,6 @@ if want test; then
 fi
 if want test || want table; then
     runs="IL=docs/results/recipe_seed1@bbox_diffusion"
-    for name in ${TEST_POLICIES:-succ_bc awr_t01}; do runs="$runs;$name=$DOCS/test/$name"; done
+    for name in $(ls $DOCS/test); do runs="$runs;$name=$DOCS/test/$name"; done
     bboxpick-compare --runs="$runs" --out=$DOCS/test_table.md
 fi

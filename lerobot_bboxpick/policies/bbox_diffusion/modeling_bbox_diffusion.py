@@ -141,12 +141,8 @@ def sampling_scheduler(
     same noise schedule, whose per-chunk history ``set_timesteps`` clears."""
     if config.sampler == "ddim":
         return ddim
-    return DPMSolverMultistepScheduler(
-        num_train_timesteps=config.num_train_timesteps,
-        beta_start=config.beta_start,
-        beta_end=config.beta_end,
-        beta_schedule=config.beta_schedule,
-        prediction_type=config.prediction_type,
+    return DPMSolverMultistepScheduler.from_config(  # DDIM's noise schedule and prediction type
+        ddim.config,
         algorithm_type="dpmsolver++",
         solver_order=2,
         lower_order_final=True,  # first order on the last step: stable at few steps (diffusers' advice)
