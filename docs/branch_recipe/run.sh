@@ -5,7 +5,7 @@
 # The goal settings are grid_ood and random_id, where this IL policy picks 37% and 53% of test scenes.
 # Choice on validation seeds 5000-5029, then test seeds 10000-10029. Every policy runs the checkpoint's
 # own 16 DDIM steps, as the IL test rows did. Run from the repository root; STEP=<name> runs one step
-# (data, merge, dagger, finetune, val, test, table).
+# (data, merge, dagger, dagger2, finetune, val, test, table).
 set -euo pipefail
 source scripts/setup.sh
 RUN=outputs/recipe_seed1/full  # STEP=recipe_seed1 of docs/results/run.sh
@@ -54,6 +54,19 @@ if want dagger; then
     done
 fi
 
+# 2c. DAgger's second round (aggregation): the chosen succ_dagger policy drives on training seeds 4100+ of the
+#     goal settings, the expert corrects in place by the same rule, 40 corrections per setting join
+#     succ_dagger's training set (succ_dagger2), and the fine-tune starts from the IL checkpoint as before.
+if want dagger2; then
+    [[ -d $OUT/dagger_corr2 ]] || bboxpick-dagger --policy_path=$OUT/succ_dagger/checkpoints/last/pretrained_model \
+        --repo_id=local/dagger_corr2 --root=$OUT/dagger_corr2 --settings=grid_ood,random_id --episodes=40 \
+        --seed_start=4100 --num_inference_steps=16 --workers=2 --correction=in_place
+    [[ -d $OUT/succ_dagger2_data ]] || lerobot-edit-dataset --new_repo_id=local/succ_dagger2_data \
+        --new_root=$OUT/succ_dagger2_data --operation.type=merge \
+        --operation.repo_ids="['local/succ_dagger_data', 'local/dagger_corr2']" \
+        --operation.roots="['$OUT/succ_dagger_data', '$OUT/dagger_corr2']" > $OUT/succ_dagger2.merge.log 2>&1
+fi
+
 # 3. Fine-tunes from the IL checkpoint with docs/branch_awr's settings: 600 steps of batch 32, AdamW 1e-4
 #    with 50 warm-up steps, EMA, float32.
 source docs/finetune.sh
@@ -65,7 +78,8 @@ if want finetune; then
             awr_t01) finetune awr_t01 --policy.awr_advantages_path=$OUT/advantages.json \
                 --policy.awr_temperature=0.1 --policy.anchor_policy_path=$CKPT ;;
             succ_bc_s1) finetune succ_bc_s1 --seed=1 ;;  # the chosen method's second training seed
-            succ_dagger | dagger_only) finetune_from $CKPT local/${name}_data $OUT/${name}_data $OUT $name ;;
+            succ_dagger | dagger_only | succ_dagger2) finetune_from $CKPT local/${name}_data $OUT/${name}_data $OUT $name ;;
+            succ_dagger_s1) finetune_from $CKPT local/succ_dagger_data $OUT/succ_dagger_data $OUT $name --seed=1 ;;
         esac
     done
 fi
