@@ -63,7 +63,7 @@ stamp=".venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)"
 if [ ! -f "$stamp" ]; then
   echo "[setup] installing the project into .venv (pyproject.toml changed or first run: up to several GB and minutes); log: $SETUP_LOG"
   quietly .venv/bin/python -m pip install --upgrade pip
-  quietly .venv/bin/python -m pip install -e ".[dev,ur5,dashboard,ray]"
+  quietly .venv/bin/python -m pip install -e ".[dev,ur5,dashboard,ray,onnx]"
   rm -f .venv/.installed-*
   touch "$stamp"
 fi

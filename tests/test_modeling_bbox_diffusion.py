@@ -1,4 +1,7 @@
-"""The policy's sampling paths: the TorchScript-traced UNet must give the eager UNet's chunks."""
+"""The policy's sampling paths: the TorchScript-traced UNet and its ONNX Runtime session must give the eager
+UNet's chunks."""
+
+import sys
 
 import pytest
 import torch
@@ -211,3 +214,33 @@ def test_timestep_spacing_picks_where_few_step_sampling_starts():
 
 def _adamw_kwargs(preset) -> dict:
     return {"lr": preset.lr, "betas": preset.betas, "eps": preset.eps, "weight_decay": preset.weight_decay}
+
+
+def test_onnx_unet_gives_the_eager_chunk_and_follows_weight_updates():
+    onnx, eager = _policy(onnx_inference=True), _policy(jit_inference=False)
+    batch = _batch(2)
+    a, b = _chunk(onnx, batch), _chunk(eager, batch)
+    assert onnx.ema_model._onnx_unets, "onnx_inference=True did not use ONNX Runtime"
+    assert not onnx.ema_model._traced_unets
+    assert a.abs().max() > 1e-3  # a real chunk, not zeros on both sides
+    assert (a - b).abs().max() < 1e-4
+    session = onnx.ema_model._onnx_unets[2]
+    assert _chunk(onnx, batch).equal(a)
+    assert onnx.ema_model._onnx_unets[2] is session  # reused, not re-exported
+    # An in-place weight change (an EMA step, load_state_dict) makes the session stale: it is re-exported
+    # and follows the new weights, as the eager UNet does.
+    for policy in (onnx, eager):
+        with torch.no_grad():
+            for p in policy.ema_model.unet.parameters():
+                p.mul_(1.5)
+    a2, b2 = _chunk(onnx, batch), _chunk(eager, batch)
+    assert onnx.ema_model._onnx_unets[2] is not session
+    assert (a2 - a).abs().max() > 1e-3  # the update changed the prediction
+    assert (a2 - b2).abs().max() < 1e-4
+    assert not any("onnx" in k for k in onnx.state_dict())  # the sessions are not part of a checkpoint
+
+
+def test_onnx_inference_without_onnxruntime_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "onnxruntime", None)  # what a plain install without the extra sees
+    with pytest.raises(ImportError, match=r"pip install 'lerobot_bboxpick\[onnx\]'"):
+        _chunk(_policy(onnx_inference=True), _batch(1))

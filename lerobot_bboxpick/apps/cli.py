@@ -81,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
         "--training", action="store_true", help="also time the training levers and the data loader"
     )
     bench.add_argument(
+        "--threads", type=_positive, default=None, help="torch threads for --inference (default: torch's)"
+    )
+    bench.add_argument(
         "--all", action="store_true", help="--policies --training --inference --collect --suite"
     )
     sheet = sub.add_parser("sheet", help="PNG contact sheet of the six settings' first wrist frames")
@@ -137,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.inference:
             from lerobot_bboxpick.apps.bench import bench_inference_levers
 
-            table += "\n\n" + bench_inference_levers()
+            table += "\n\n" + bench_inference_levers(threads=args.threads)
         if args.collect:
             from lerobot_bboxpick.apps.bench import bench_collect
 

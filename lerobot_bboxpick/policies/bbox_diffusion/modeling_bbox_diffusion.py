@@ -40,6 +40,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     bbox_to_mask,
     mask_moments,
 )
+from lerobot_bboxpick.policies.bbox_diffusion.onnx_denoiser import OnnxDenoiser
 from lerobot_bboxpick.policies.bbox_diffusion.target_crop import TargetView
 
 log = logging.getLogger(__name__)
@@ -178,9 +179,11 @@ class BboxDiffusionModel(nn.Module):
             timestep_spacing=config.timestep_spacing,
         )
         self.sampling_scheduler = sampling_scheduler(config, self.noise_scheduler)
-        # TorchScript traces of the UNet by (device, dtype, batch), built on first use (see _denoiser).
+        # TorchScript traces of the UNet by (device, dtype, batch) and ONNX Runtime sessions of it by
+        # batch, built on first use (see _denoiser).
         # A plain dict, not a submodule: nothing extra in the state dict.
         self._traced_unets: dict[tuple, torch.jit.ScriptModule] = {}
+        self._onnx_unets: dict[int, OnnxDenoiser] = {}
 
     def global_condition(self, images: Tensor, states: Tensor, bboxes: Tensor | None) -> Tensor:
         """(B, T, 3, H, W) images in [0,1], (B, T, 10) absolute poses, (B, T, 4) bboxes -> (B, cond)."""
@@ -268,11 +271,19 @@ class BboxDiffusionModel(nn.Module):
                 reference_prediction = reference.unet(noisy, timesteps, global_cond=reference_cond)
         return DenoisingTerms(loss=loss, prediction=prediction, reference_prediction=reference_prediction)
 
-    def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> nn.Module:
-        """The UNet to call during sampling: its TorchScript trace in eval mode (``jit_inference``), else
-        the module itself. The trace holds the same parameter tensors, so in-place updates (EMA, loading
-        a state dict) need no re-trace; autocast and training keep the eager module."""
-        if not self.config.jit_inference or self.training or torch.is_autocast_enabled(cond.device.type):
+    def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
+        """The UNet to call during sampling: in eval mode its ONNX Runtime session (``onnx_inference``,
+        on a CPU) or its TorchScript trace (``jit_inference``), else the module itself. The trace holds the
+        same parameter tensors, so in-place updates (EMA, loading a state dict) need no re-trace; the
+        session is re-exported after them; autocast and training keep the eager module."""
+        if self.training or torch.is_autocast_enabled(cond.device.type):
+            return self.unet
+        if self.config.onnx_inference and cond.device.type == "cpu":
+            denoiser = self._onnx_unets.get(cond.shape[0])
+            if denoiser is None or denoiser.stale:  # new, or the weights changed since its export
+                denoiser = self._onnx_unets[cond.shape[0]] = OnnxDenoiser(self.unet, sample, timestep, cond)
+            return denoiser
+        if not self.config.jit_inference:
             return self.unet
         key = (cond.device, cond.dtype, cond.shape[0])
         if key not in self._traced_unets:

@@ -1,0 +1,76 @@
+"""The UNet's denoising call through ONNX Runtime (``--policy.onnx_inference=true``, the ``onnx`` extra).
+
+This small UNet's call on a CPU is bound by per-op dispatch, not arithmetic: a TorchScript trace still
+goes through PyTorch's dispatcher for each of its few hundred ops, while ONNX Runtime runs the exported
+graph from its own fused kernels (docs/benchmarks.md measures both side by side). The session holds a
+copy of the weights, so it is rebuilt when any parameter has changed in place since the export (an EMA
+step, ``load_state_dict``): PyTorch bumps a tensor's version counter on every in-place write.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+
+import torch
+from torch import Tensor, nn
+
+INPUT_NAMES = ("sample", "timestep", "global_cond")
+
+
+def _onnxruntime():
+    """ONNX Runtime, after checking the extra's other half (torch's exporter writes with ``onnx``)."""
+    try:
+        import onnx  # noqa: F401
+        import onnxruntime
+    except ImportError as err:  # an optional extra: say which
+        raise ImportError(
+            f"onnx_inference=true needs {err.name}: pip install 'lerobot_bboxpick[onnx]'"
+        ) from err
+    return onnxruntime
+
+
+class OnnxDenoiser:
+    """``unet(sample, timestep, global_cond)`` for one batch size, run by an ONNX Runtime CPU session."""
+
+    def __init__(self, unet: nn.Module, sample: Tensor, timestep: Tensor, cond: Tensor) -> None:
+        ort = _onnxruntime()
+        self._parameters = list(unet.parameters())
+        self._versions = self._weight_versions()
+        graph = io.BytesIO()
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the TorchScript-based exporter's deprecation notice
+            torch.onnx.export(
+                unet,
+                (sample, timestep, cond),
+                graph,
+                input_names=list(INPUT_NAMES),
+                output_names=["prediction"],
+                dynamo=False,  # the dynamo exporter needs onnxscript and re-traces for minutes
+                opset_version=17,
+            )
+        options = ort.SessionOptions()
+        # The caller's torch thread budget (a suite worker sets 1): two pools would oversubscribe.
+        options.intra_op_num_threads = torch.get_num_threads()
+        options.inter_op_num_threads = 1
+        # ORT's workers busy-wait between runs by default, taking the cores from the torch ops (encoder,
+        # scheduler) that run between the UNet calls.
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        options.log_severity_level = 3  # errors only: no optimizer notes on the console
+        self._session = ort.InferenceSession(graph.getvalue(), options, providers=["CPUExecutionProvider"])
+
+    def _weight_versions(self) -> tuple[int, ...]:
+        return tuple(p._version for p in self._parameters)
+
+    @property
+    def stale(self) -> bool:
+        """Whether a parameter was written in place since the export (the session's copy is old)."""
+        return self._weight_versions() != self._versions
+
+    def __call__(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Tensor:
+        """The UNet's prediction for ``sample`` at ``timestep`` given ``cond`` (CPU float32 tensors)."""
+        feeds = {
+            name: value.detach().numpy()
+            for name, value in zip(INPUT_NAMES, (sample, timestep, cond), strict=True)
+        }
+        return torch.from_numpy(self._session.run(None, feeds)[0])
