@@ -244,3 +244,22 @@ def test_onnx_inference_without_onnxruntime_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "onnxruntime", None)  # what a plain install without the extra sees
     with pytest.raises(ImportError, match=r"pip install 'lerobot_bboxpick\[onnx\]'"):
         _chunk(_policy(onnx_inference=True), _batch(1))
+
+
+def _training_timesteps(policy: BboxDiffusionPolicy, b: int) -> set[int]:
+    """The timesteps one training step asks the UNet about (its second positional argument)."""
+    seen: list[torch.Tensor] = []
+    hook = policy.model.unet.register_forward_pre_hook(lambda _, args: seen.append(args[1].clone()))
+    policy.train()
+    policy.forward({**_batch(b), "action": torch.rand(b, 16, 10)})
+    hook.remove()
+    return {int(t) for t in torch.cat(seen)}
+
+
+def test_train_on_sampler_timesteps_trains_only_where_ddim_samples():
+    """With six leading DDIM steps of 50, the sampler visits 40, 32, 24, 16, 8 and 0: a model trained for
+    that sampler is asked about those noise levels only; by default about all 50."""
+    few = _policy(num_inference_steps=6, train_on_sampler_timesteps=True)
+    assert few.model.sampler_timesteps().tolist() == [40, 32, 24, 16, 8, 0]
+    assert _training_timesteps(few, 64) == {40, 32, 24, 16, 8, 0}  # 64 draws hit all six (p > 0.99)
+    assert len(_training_timesteps(_policy(num_inference_steps=6), 64) - {40, 32, 24, 16, 8, 0}) > 20

@@ -399,3 +399,18 @@ if want trace; then
     --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
     --out docs/results/trace_shipped_random_id.md
 fi
+# A model for few-step sampling (issue 14's speed goal): the shipped checkpoint fine-tuned at only the six
+# timesteps six leading DDIM steps visit (--policy.train_on_sampler_timesteps), on the practical recipe's
+# own demos (docs/finetune.sh: 600 x 32, AdamW 1e-4, EMA, float32), then sampled at those 6 steps on the
+# 180 validation scenes of validation_ddim16 / validation_ddim6 (rule in results.md).
+if want validation_fewstep6; then
+  source docs/finetune.sh
+  finetune_from examples/bbox_diffusion_lego_pick local/lego_pick_practical \
+    outputs/practical_seed1/practical/data $X fewstep6 --policy.num_inference_steps=6 \
+    --policy.train_on_sampler_timesteps=true
+  bboxpick-suite --policies=fewstep6=$X/fewstep6/checkpoints/last/pretrained_model --episodes=30 \
+    --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_fewstep6
+  publish $X/val_fewstep6 validation_fewstep6
+  bboxpick-compare --out=docs/results/validation_fewstep6.md \
+    --runs="ddim16=docs/results/validation_ddim16;ddim6=docs/results/validation_ddim6;fewstep6=docs/results/validation_fewstep6"
+fi

@@ -126,6 +126,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # prediction: one UNet call per step as DDIM. For the shipped checkpoint it lands further from the
     # converged chunk than DDIM on average at 4-8 calls (docs/benchmarks.md), so "ddim" stays the default.
     sampler: str = "ddim"
+    # Train only at the timesteps DDIM visits with num_inference_steps (a model for few-step sampling):
+    # the denoiser's capacity goes to the few noise levels it is asked about at inference, instead of all
+    # num_train_timesteps. Off: uniform over all of them (every published checkpoint).
+    train_on_sampler_timesteps: bool = False
     beta_schedule: str = "squaredcos_cap_v2"
     beta_start: float = 0.0001
     beta_end: float = 0.02

@@ -254,9 +254,13 @@ class BboxDiffusionModel(nn.Module):
         noise = torch.randn_like(trajectory)
         # Input perturbation (UMI): the model sees slightly more noise than it is asked to predict.
         perturbed = noise + self.config.input_perturbation * torch.randn_like(trajectory)
-        timesteps = torch.randint(
-            0, self.config.num_train_timesteps, (trajectory.shape[0],), device=trajectory.device
-        )
+        if self.config.train_on_sampler_timesteps:
+            visited = self.sampler_timesteps().to(trajectory.device)
+            timesteps = visited[torch.randint(0, len(visited), (trajectory.shape[0],), device=visited.device)]
+        else:
+            timesteps = torch.randint(
+                0, self.config.num_train_timesteps, (trajectory.shape[0],), device=trajectory.device
+            )
         noisy = self.noise_scheduler.add_noise(trajectory, perturbed, timesteps)
         prediction = self.unet(noisy, timesteps, global_cond=cond)
         target = noise if self.config.prediction_type == "epsilon" else trajectory
@@ -270,6 +274,11 @@ class BboxDiffusionModel(nn.Module):
                 reference_cond = reference.global_condition(images, states, bboxes)
                 reference_prediction = reference.unet(noisy, timesteps, global_cond=reference_cond)
         return DenoisingTerms(loss=loss, prediction=prediction, reference_prediction=reference_prediction)
+
+    def sampler_timesteps(self) -> Tensor:
+        """The timesteps DDIM visits with ``num_inference_steps`` (its spacing), first to last."""
+        self.noise_scheduler.set_timesteps(self.config.num_inference_steps)  # sample() sets them anew
+        return self.noise_scheduler.timesteps.clone()
 
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
         """The UNet to call during sampling: in eval mode its ONNX Runtime session (``onnx_inference``,
