@@ -92,7 +92,7 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # Python dispatch; the trace shares the weights, so EMA updates and loaded checkpoints are seen.
     jit_inference: bool = True
     # Run them through ONNX Runtime instead (the ``onnx`` extra; CPU only; eval mode, no autocast): the
-    # same numbers (< 1e-5) without PyTorch's per-op dispatch (docs/benchmarks.md, "ONNX Runtime").
+    # same chunks (< 1e-4) without PyTorch's per-op dispatch (docs/benchmarks.md, "ONNX Runtime").
     onnx_inference: bool = False
     # ``use_amp`` is a training flag here, but lerobot-eval also samples under autocast when it is set.
     # On a CPU bf16 sampling is eager and slower than the float32 trace (docs/benchmarks.md), so
