@@ -369,6 +369,8 @@ def bench_inference_levers(chunks: int = 20, threads: int | None = None) -> str:
     ratios hold; ``threads`` sets torch's thread count (None: torch's default)."""
     import torch
 
+    from lerobot_bboxpick.policies.bbox_diffusion.onnx_denoiser import require_onnxruntime
+
     if threads is not None:
         torch.set_num_threads(threads)
     obs = {
@@ -378,10 +380,10 @@ def bench_inference_levers(chunks: int = 20, threads: int | None = None) -> str:
     }
     levers = dict(INFERENCE_LEVERS)
     try:
-        import onnxruntime  # noqa: F401
-    except ImportError:  # an optional extra: its rows are left out, with a warning
+        require_onnxruntime()
+    except ImportError as err:  # an optional extra: its rows are left out, with a warning
         levers = {name: o for name, o in levers.items() if not o.get("onnx_inference")}
-        log.warning("no ONNX Runtime rows: onnxruntime is missing (pip install 'lerobot_bboxpick[onnx]')")
+        log.warning("no ONNX Runtime rows: %s", err)
     policies = {name: _lever_policy(overrides).eval() for name, overrides in levers.items()}
     samples: dict[str, list[float]] = {name: [] for name in policies}
     with torch.no_grad():

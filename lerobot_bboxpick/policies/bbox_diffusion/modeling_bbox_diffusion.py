@@ -276,8 +276,9 @@ class BboxDiffusionModel(nn.Module):
         return DenoisingTerms(loss=loss, prediction=prediction, reference_prediction=reference_prediction)
 
     def sampler_timesteps(self) -> Tensor:
-        """The timesteps DDIM visits with ``num_inference_steps`` (its spacing), first to last."""
-        self.noise_scheduler.set_timesteps(self.config.num_inference_steps)  # sample() sets them anew
+        """The timesteps DDIM visits with ``num_inference_steps`` (its spacing), first to last; the
+        scheduler is left set to them, as ``sample`` steps with it."""
+        self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
         return self.noise_scheduler.timesteps.clone()
 
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
@@ -328,9 +329,9 @@ class BboxDiffusionModel(nn.Module):
             dtype=cond.dtype,
         )
         scheduler = self.sampling_scheduler
-        self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
+        visited = self.sampler_timesteps()  # also leaves DDIM set to them
         if scheduler is not self.noise_scheduler:  # at DDIM's timesteps (timestep_spacing); clears history
-            scheduler.set_timesteps(timesteps=self.noise_scheduler.timesteps.tolist())
+            scheduler.set_timesteps(timesteps=visited.tolist())
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
         unet = self._denoiser(sample, timestep, cond)  # chosen (and traced if new) once per chunk
         # DDIM clips its own x0 estimate; DPM-Solver++ has no such option, so a predicted clean

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import warnings
+from typing import Any
 
 import torch
 from torch import Tensor, nn
@@ -19,7 +20,7 @@ from torch import Tensor, nn
 INPUT_NAMES = ("sample", "timestep", "global_cond")
 
 
-def _onnxruntime():
+def require_onnxruntime() -> Any:
     """ONNX Runtime, after checking the extra's other half (torch's exporter writes with ``onnx``)."""
     try:
         import onnx  # noqa: F401
@@ -35,7 +36,7 @@ class OnnxDenoiser:
     """``unet(sample, timestep, global_cond)`` for one batch size, run by an ONNX Runtime CPU session."""
 
     def __init__(self, unet: nn.Module, sample: Tensor, timestep: Tensor, cond: Tensor) -> None:
-        ort = _onnxruntime()
+        ort = require_onnxruntime()
         self._parameters = list(unet.parameters())
         self._versions = self._weight_versions()
         graph = io.BytesIO()
