@@ -207,6 +207,36 @@ def test_train_fine_tunes_a_checkpoint_with_advantage_weights_an_anchor_and_rela
     assert moved > 0  # it trained from the checkpoint's weights
 
 
+@pytest.mark.slow
+def test_train_distils_a_checkpoint_into_half_the_steps_without_saving_the_teacher(
+    checkpoint, dataset, tmp_path
+):
+    """``lerobot-train --policy.path=<teacher> --policy.distill_teacher_path=<teacher>
+    --policy.num_inference_steps=4`` (the teacher stepping at 8): LeRobot's own loop trains the student
+    from the teacher's weights and saves the policy's weights only; a step count whose steps the
+    teacher's cannot pair (7 of 50) is refused by name."""
+    from safetensors.torch import load_file
+
+    args = [
+        f"--policy.path={checkpoint}",
+        "--policy.use_amp=false",
+        f"--policy.distill_teacher_path={checkpoint}",
+    ]
+    student = train_two_steps([*args, "--policy.num_inference_steps=4"], dataset, tmp_path / "student")
+    config = json.loads((student / "config.json").read_text())
+    assert (config["distill_teacher_path"], config["num_inference_steps"]) == (str(checkpoint), 4)
+    before, after = load_file(checkpoint / "model.safetensors"), load_file(student / "model.safetensors")
+    assert before.keys() == after.keys()  # the teacher is not saved with the student
+    assert max((after[k].float() - before[k].float()).abs().max().item() for k in before) > 0
+    refused = subprocess.run(
+        [BIN / "lerobot-train", *args, "--policy.num_inference_steps=7", "--dataset.repo_id=test/bd",
+         f"--dataset.root={dataset}", f"--output_dir={tmp_path / 'refused'}", "--steps=1", "--batch_size=2",
+         "--num_workers=0", "--wandb.enable=false"],
+        capture_output=True, text=True, timeout=600, env=_env(),
+    )  # fmt: skip
+    assert refused.returncode != 0 and "num_inference_steps=7" in refused.stderr
+
+
 def _episode_rows(root: Path) -> list[list[int]]:
     import numpy as np
     from lerobot.datasets.lerobot_dataset import LeRobotDataset

@@ -414,3 +414,18 @@ if want validation_fewstep6; then
   bboxpick-compare --out=docs/results/validation_fewstep6.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim6=docs/results/validation_ddim6;fewstep6=docs/results/validation_fewstep6"
 fi
+# Progressive step distillation (issue 14's speed goal): the shipped checkpoint as its own teacher; the
+# student samples at 8 DDIM steps and learns, per step, where the teacher's two of 16 land
+# (--policy.distill_teacher_path; 1000 x 32, AdamW 1e-4, EMA, float32), then the 180 validation scenes at
+# 8 steps beside validation_ddim16 / validation_ddim8 (rule in results.md).
+if want validation_distill8; then
+  source docs/finetune.sh
+  FINETUNE_STEPS=1000 finetune_from examples/bbox_diffusion_lego_pick local/lego_pick_practical \
+    outputs/practical_seed1/practical/data $X distill8 --policy.num_inference_steps=8 \
+    --policy.distill_teacher_path=examples/bbox_diffusion_lego_pick
+  bboxpick-suite --policies=distill8=$X/distill8/checkpoints/last/pretrained_model --episodes=30 \
+    --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_distill8
+  publish $X/val_distill8 validation_distill8
+  bboxpick-compare --out=docs/results/validation_distill8.md \
+    --runs="ddim16=docs/results/validation_ddim16;ddim8=docs/results/validation_ddim8;distill8=docs/results/validation_distill8"
+fi

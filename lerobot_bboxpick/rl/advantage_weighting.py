@@ -74,13 +74,15 @@ class AdvantageWeightedLoss:
 
             episode_advantages = torch.from_numpy(load_advantages(config.awr_advantages_path))
         if config.awr_critic_path is not None:
-            critic = IqlCriticModel.from_pretrained(_existing(config.awr_critic_path, "awr_critic_path"))
-            _check_matches(critic.encoder.config, config, "awr_critic_path", ("horizon", "n_obs_steps"))
+            critic = IqlCriticModel.from_pretrained(
+                require_checkpoint_dir(config.awr_critic_path, "awr_critic_path")
+            )
+            check_config_matches(critic.encoder.config, config, "awr_critic_path", ("horizon", "n_obs_steps"))
         if config.anchor_policy_path is not None:
-            policy = load_policy(_existing(config.anchor_policy_path, "anchor_policy_path"))
+            policy = load_policy(require_checkpoint_dir(config.anchor_policy_path, "anchor_policy_path"))
             reference = policy.ema_model if policy.ema_model is not None else policy.model
             fields = ("horizon", "n_obs_steps", "image_size", "bbox_mode", "mask_centroid", "crop_ratio")
-            _check_matches(reference.config, config, "anchor_policy_path", fields)
+            check_config_matches(reference.config, config, "anchor_policy_path", fields)
         return cls(
             critic,
             reference,
@@ -147,13 +149,14 @@ class AdvantageWeightedLoss:
         return loss, info
 
 
-def _existing(path: str, field: str) -> Path:
+def require_checkpoint_dir(path: str, field: str) -> Path:
+    """``path`` as a Path, or FileNotFoundError naming the config ``field`` when it is no folder."""
     if not Path(path).is_dir():
         raise FileNotFoundError(f"{field}={path!r} is not a checkpoint folder")
     return Path(path)
 
 
-def _check_matches(
+def check_config_matches(
     theirs: BboxDiffusionConfig, ours: BboxDiffusionConfig, field: str, names: tuple[str, ...]
 ) -> None:
     """The critic's / reference's observation and chunk layout must be the trained policy's."""

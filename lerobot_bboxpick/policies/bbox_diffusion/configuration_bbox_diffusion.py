@@ -180,6 +180,11 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # critic-optimised chunks by dataset frame index; where its entry is valid, the loss imitates that
     # chunk instead of the dataset's (with ``anchor_policy_path``: the paper's anchor). Training only.
     parl_cache_path: str | None = None
+    # Progressive step distillation (``step_distillation``): a frozen teacher checkpoint of this
+    # architecture; each of this policy's num_inference_steps DDIM steps learns to land where two of the
+    # teacher's steps land when it steps 2 x num_inference_steps times (whatever its own
+    # num_inference_steps): half the UNet calls per chunk. Training only.
+    distill_teacher_path: str | None = None
 
     # Checkpoints stay local unless asked: this machine (and many labs) has no Hub access.
     push_to_hub: bool = False
@@ -237,6 +242,11 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(
                 "awr_critic_path and awr_advantages_path are both set: weight by a critic or by measured "
                 "advantages, not both"
+            )
+        if self.distill_teacher_path is not None and (self.advantage_weighted or self.parl_cache_path):
+            raise ValueError(
+                "distill_teacher_path is set with awr_critic_path / awr_advantages_path / "
+                "anchor_policy_path / parl_cache_path: step distillation is its own objective, set one"
             )
         for name in ("awr_bc_weight", "anchor_weight"):
             if not getattr(self, name) >= 0.0:

@@ -237,20 +237,35 @@ class BboxDiffusionModel(nn.Module):
         made relative to the latest observed pose first."""
         return self.denoising_terms(batch).loss.mean()
 
+    def conditioned_chunk(
+        self, batch: dict[str, Tensor], reference: "BboxDiffusionModel | None" = None
+    ) -> tuple[Tensor, Tensor, Tensor | None]:
+        """One training draw's global condition (augmented observation), the batch's action chunk
+        (relative to the latest observed pose, scaled), and, given a frozen ``reference`` model of the
+        same architecture, its condition of the same crop and colour jitter (its augmentation replays
+        this model's random draws)."""
+        images, states, bboxes = self._inputs(batch)
+        devices = [states.device] if states.device.type == "cuda" else []
+        augmentation_draws = _rng_states(devices)  # where this model's crop and jitter draws start
+        cond = self.global_condition(images, states, bboxes)
+        reference_cond = None
+        if reference is not None:
+            # Replaying the augmentation's draws gives the reference the same crop and jitter; the fork
+            # puts the generators back where this model's draws left them.
+            with torch.no_grad(), torch.random.fork_rng(devices=devices):
+                _set_rng_states(augmentation_draws, devices)
+                reference_cond = reference.global_condition(images, states, bboxes)
+        with torch.autocast(states.device.type, enabled=False):  # millimetres of 0.5 m poses: float32
+            relative = relative_pose10_torch(batch[ACTION].float(), states[:, -1].float())
+        return cond, self.action_scaler(relative), reference_cond
+
     def denoising_terms(
         self, batch: dict[str, Tensor], reference: "BboxDiffusionModel | None" = None
     ) -> DenoisingTerms:
         """Per-sample denoising losses of one training draw (augmentation, noise, timesteps), and, given
         a frozen ``reference`` model of the same architecture, its prediction for the same draw: the
-        same noisy chunk and timestep, and the same crop and colour jitter of the observation (its
-        augmentation replays this model's random draws)."""
-        images, states, bboxes = self._inputs(batch)
-        devices = [states.device] if states.device.type == "cuda" else []
-        augmentation_draws = _rng_states(devices)  # where this model's crop and jitter draws start
-        cond = self.global_condition(images, states, bboxes)
-        with torch.autocast(states.device.type, enabled=False):  # millimetres of 0.5 m poses: float32
-            relative = relative_pose10_torch(batch[ACTION].float(), states[:, -1].float())
-        trajectory = self.action_scaler(relative)
+        same noisy chunk and timestep, and the same crop and colour jitter of the observation."""
+        cond, trajectory, reference_cond = self.conditioned_chunk(batch, reference)
         noise = torch.randn_like(trajectory)
         # Input perturbation (UMI): the model sees slightly more noise than it is asked to predict.
         perturbed = noise + self.config.input_perturbation * torch.randn_like(trajectory)
@@ -267,11 +282,7 @@ class BboxDiffusionModel(nn.Module):
         loss = F.mse_loss(prediction, target, reduction="none").mean(dim=(1, 2))
         reference_prediction = None
         if reference is not None:
-            # Replaying the augmentation's draws gives the reference the same crop and jitter; the fork
-            # puts the generators back where the noise draws left them.
-            with torch.no_grad(), torch.random.fork_rng(devices=devices):
-                _set_rng_states(augmentation_draws, devices)
-                reference_cond = reference.global_condition(images, states, bboxes)
+            with torch.no_grad():
                 reference_prediction = reference.unet(noisy, timesteps, global_cond=reference_cond)
         return DenoisingTerms(loss=loss, prediction=prediction, reference_prediction=reference_prediction)
 
@@ -417,7 +428,8 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         self._actions: deque[Tensor] = deque()
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
-        """Training loss: the denoising loss, or the advantage-weighted objective when the config names a
+        """Training loss: the denoising loss, the step-distillation loss when the config names a teacher
+        (``distill_teacher_path``), or the advantage-weighted objective when it names a
         critic, measured advantages or a reference policy (``awr_critic_path`` / ``awr_advantages_path`` /
         ``anchor_policy_path``), on the batch's action
         chunks or, where a PA-RL cache (``parl_cache_path``) holds a valid entry, on its optimised ones."""
@@ -431,6 +443,10 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
             from lerobot_bboxpick.rl.advantage_weighting import AdvantageWeightedLoss  # rl imports us
 
             self._fine_tuning = AdvantageWeightedLoss.from_config(self.config)
+        if self._fine_tuning is None and self.config.distill_teacher_path:
+            from lerobot_bboxpick.policies.bbox_diffusion.step_distillation import StepDistillationLoss
+
+            self._fine_tuning = StepDistillationLoss.from_config(self.config)
         if self._fine_tuning is not None:
             return self._fine_tuning(self.model, batch)
         loss = self.model.compute_loss(batch)
