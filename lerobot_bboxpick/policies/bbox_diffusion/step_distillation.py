@@ -181,4 +181,5 @@ class StepDistillationLoss:
             target = one_step_target(model, noisy, landed, start, end)
         prediction = model.unet(noisy, start, global_cond=cond)
         loss = F.mse_loss(prediction, target)
-        return loss, {"distill_loss": loss.item()}
+        # Its root, in scaled chunk units: lerobot-train logs three decimals, and the loss is ~1e-4.
+        return loss, {"distill_rms": loss.sqrt().item()}
