@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from lerobot_bboxpick import seeds
 from lerobot_bboxpick.eval.suite import (
     SuiteConfig,
     markdown_table,
@@ -195,6 +196,8 @@ def test_resume_is_refused_after_the_checkpoint_weights_change(tmp_path: Path) -
         run_suite(cfg(n_action_steps=8))
     with pytest.raises(ValueError, match="num_inference_steps"):
         run_suite(cfg(num_inference_steps=4))
+    with pytest.raises(ValueError, match="policy_seed_offset"):
+        run_suite(cfg(policy_seed_offset=7))
 
     run_suite(cfg(fresh=True))  # asked for: the old episodes move aside, the new run starts over
     now = read_episodes(out / "episodes.jsonl")
@@ -220,3 +223,25 @@ def test_the_noisy_bbox_source_reaches_the_policy_at_its_iou(tmp_path: Path) -> 
     assert [r["bbox_source"] for r in records] == ["noisy", "noisy"]
     assert all(abs(r["bbox_mean_iou"] - 0.6) < 0.02 for r in records), records
     assert "bbox source: noisy (IoU 0.6" in table.read_text()
+
+
+def test_a_policy_seed_offset_redraws_the_policys_noise_in_the_same_scene(tmp_path: Path) -> None:
+    """``--policy_seed_offset``: the same scene and target, the policy's noise drawn from seed + offset,
+    so the random policy moves the arm elsewhere."""
+    ckpt = _random_checkpoint(tmp_path / "ckpt")
+    records = {}
+    for offset in (0, 7):
+        out = tmp_path / f"offset{offset}"
+        run_suite(
+            SuiteConfig(
+                policies=f"p={ckpt}", settings="grid_id", episodes=1, workers=1, videos=0, max_steps=20,
+                policy_seed_offset=offset, out_dir=out,
+            )
+        )  # fmt: skip
+        (records[offset],) = read_episodes(out / "episodes.jsonl")
+    seed = seeds.TEST_START
+    assert (records[0]["policy_seed"], records[7]["policy_seed"]) == (seed, seed + 7)
+    assert (records[0]["scene"], records[0]["target"]) == (records[7]["scene"], records[7]["target"])
+    assert abs(records[0]["final_distance_m"] - records[7]["final_distance_m"]) > 1e-4
+    with pytest.raises(ValueError, match="policy_seed_offset=-1"):
+        SuiteConfig(policy_seed_offset=-1, out_dir=tmp_path)

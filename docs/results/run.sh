@@ -414,6 +414,15 @@ if want validation_fewstep6; then
   bboxpick-compare --out=docs/results/validation_fewstep6.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim6=docs/results/validation_ddim6;fewstep6=docs/results/validation_fewstep6"
 fi
+# The sampling noise's own share of the lever comparisons: the shipped checkpoint at its 16 steps on the
+# same 180 validation scenes as validation_ddim16, with only the policy's noise redrawn (seed + 100000).
+if want validation_resample16; then
+  bboxpick-suite --policies=ddim16_resampled=examples/bbox_diffusion_lego_pick --episodes=30 \
+    --seed_start=5000 --videos=0 --workers=2 --policy_seed_offset=100000 --out_dir=$X/val_resample16
+  publish $X/val_resample16 validation_resample16
+  bboxpick-compare --out=docs/results/validation_resample16.md \
+    --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim8=docs/results/validation_ddim8;distill8=docs/results/validation_distill8"
+fi
 # Progressive step distillation (issue 14's speed goal): the shipped checkpoint as its own teacher; the
 # student samples at 8 DDIM steps and learns, per step, where the teacher's two of 16 land
 # (--policy.distill_teacher_path; 1000 x 32, AdamW 1e-4, EMA, float32), then the 180 validation scenes at

@@ -76,6 +76,9 @@ class SuiteConfig:
     n_action_steps: int | None = None
     # Denoising steps per chunk instead of the checkpoint's (an inference-speed lever, docs/benchmarks.md).
     num_inference_steps: int | None = None
+    # The policy's noise draws in an episode start at its seed + this offset (the scene stays the seed's):
+    # a second run with another offset shows how many outcomes the sampling noise alone changes.
+    policy_seed_offset: int = 0
     # Q-reranking (paper section 4.2): every chunk is the argmax-Q of rerank_samples chunks the policy
     # draws, scored by this critic checkpoint (bboxpick-train-critic / bboxpick-train-mc-critic).
     critic_path: Path | None = None
@@ -115,6 +118,10 @@ class SuiteConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name}={value!r} must be an integer >= {minimum}")
+        if not isinstance(self.policy_seed_offset, int) or not 0 <= self.policy_seed_offset < 2**31 - 100_000:
+            raise ValueError(
+                f"policy_seed_offset={self.policy_seed_offset!r} must be an integer in [0, 2**31 - 100000)"
+            )
         for name in ("n_action_steps", "num_inference_steps"):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, int) or value < 1):
@@ -190,6 +197,8 @@ def run_key(cfg: SuiteConfig, path: str) -> dict:
         key["n_action_steps"] = cfg.n_action_steps if cfg.n_action_steps is not None else own
         if cfg.num_inference_steps is not None:  # absent otherwise: older tables' run keys stay valid
             key["num_inference_steps"] = cfg.num_inference_steps
+        if cfg.policy_seed_offset:  # likewise
+            key["policy_seed_offset"] = cfg.policy_seed_offset
         critic = critic_options(cfg)
         if critic is not None:
             key["critic"] = weights_digest(critic.pop("critic_path"))
@@ -332,7 +341,7 @@ def run_episode(task: dict) -> dict:
         runner,
         setting=task["setting"],
         seed=seed,
-        policy_seed=seed,
+        policy_seed=seed + task.get("policy_seed_offset", 0),
         video_path=video,
         env=env,
         bbox_source=source,
@@ -372,6 +381,7 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, di
                         "max_steps": cfg.max_steps,
                         "n_action_steps": cfg.n_action_steps,
                         "num_inference_steps": cfg.num_inference_steps,
+                        "policy_seed_offset": cfg.policy_seed_offset,
                         "critic": critic_options(cfg),
                         "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
