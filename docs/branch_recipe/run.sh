@@ -80,6 +80,9 @@ if want finetune; then
             succ_bc_s1) finetune succ_bc_s1 --seed=1 ;;  # the chosen method's second training seed
             succ_dagger | dagger_only | succ_dagger2) finetune_from $CKPT local/${name}_data $OUT/${name}_data $OUT $name ;;
             succ_dagger_s1) finetune_from $CKPT local/succ_dagger_data $OUT/succ_dagger_data $OUT $name --seed=1 ;;
+            succ_dagger_s2) finetune_from $CKPT local/succ_dagger_data $OUT/succ_dagger_data $OUT $name --seed=2 ;;
+            # The control: the same 600 steps on the IL policy's own demos only (what training longer gives).
+            il_more) finetune_from $CKPT local/lego_pick_full $RUN/data $OUT $name ;;
         esac
     done
 fi
