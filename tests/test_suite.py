@@ -225,9 +225,9 @@ def test_the_noisy_bbox_source_reaches_the_policy_at_its_iou(tmp_path: Path) -> 
     assert "bbox source: noisy (IoU 0.6" in table.read_text()
 
 
-def test_a_policy_seed_offset_redraws_the_policys_noise_in_the_same_scene(tmp_path: Path) -> None:
+def test_policy_seed_offset_redraws_the_noise_and_onnx_inference_keeps_the_episode(tmp_path: Path) -> None:
     """``--policy_seed_offset``: the same scene and target, the policy's noise drawn from seed + offset,
-    so the random policy moves the arm elsewhere."""
+    so the random policy moves the arm elsewhere; ``--onnx_inference`` replays the offset-0 episode."""
     ckpt = _random_checkpoint(tmp_path / "ckpt")
     records = {}
     for offset in (0, 7):
@@ -243,5 +243,16 @@ def test_a_policy_seed_offset_redraws_the_policys_noise_in_the_same_scene(tmp_pa
     assert (records[0]["policy_seed"], records[7]["policy_seed"]) == (seed, seed + 7)
     assert (records[0]["scene"], records[0]["target"]) == (records[7]["scene"], records[7]["target"])
     assert abs(records[0]["final_distance_m"] - records[7]["final_distance_m"]) > 1e-4
+    # ONNX Runtime's UNet: the same chunks to < 1e-4, so the same episode to the millimetre.
+    out = tmp_path / "onnx"
+    run_suite(
+        SuiteConfig(
+            policies=f"p={ckpt}", settings="grid_id", episodes=1, workers=1, videos=0, max_steps=20,
+            onnx_inference=True, out_dir=out,
+        )
+    )  # fmt: skip
+    (onnx,) = read_episodes(out / "episodes.jsonl")
+    assert onnx["run_key"]["onnx_inference"] and onnx["policy_seed"] == seed
+    assert abs(onnx["final_distance_m"] - records[0]["final_distance_m"]) < 1e-3
     with pytest.raises(ValueError, match="policy_seed_offset=-1"):
         SuiteConfig(policy_seed_offset=-1, out_dir=tmp_path)

@@ -34,10 +34,12 @@ class PolicyRunner:
         device: str = "cpu",
         n_action_steps: int | None = None,
         num_inference_steps: int | None = None,
+        onnx_inference: bool = False,
     ) -> PolicyRunner:
         """Load like ``lerobot-eval --policy.path=path``; ``n_action_steps`` overrides the steps executed
         per predicted chunk (like ``--policy.n_action_steps``), ``num_inference_steps`` the denoising
-        steps per chunk (a diffusion policy's ``--policy.num_inference_steps``)."""
+        steps per chunk (a diffusion policy's ``--policy.num_inference_steps``); ``onnx_inference`` runs a
+        ``bbox_diffusion`` UNet through ONNX Runtime (``--policy.onnx_inference=true``)."""
         from lerobot.configs import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
@@ -49,6 +51,10 @@ class PolicyRunner:
             if not hasattr(config, "num_inference_steps"):
                 raise ValueError(f"num_inference_steps: policy type {config.type!r} has no denoising steps")
             config.num_inference_steps = num_inference_steps
+        if onnx_inference:
+            if not hasattr(config, "onnx_inference"):
+                raise ValueError(f"onnx_inference: policy type {config.type!r} has no ONNX Runtime path")
+            config.onnx_inference = True
         policy = get_policy_class(config.type).from_pretrained(path, config=config)
         policy.eval()
         pre, post = make_pre_post_processors(

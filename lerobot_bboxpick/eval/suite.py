@@ -79,6 +79,9 @@ class SuiteConfig:
     # The policy's noise draws in an episode start at its seed + this offset (the scene stays the seed's):
     # a second run with another offset shows how many outcomes the sampling noise alone changes.
     policy_seed_offset: int = 0
+    # Run bbox_diffusion UNets through ONNX Runtime (the onnx extra): the same chunks to < 1e-4, less time
+    # per chunk on a CPU (docs/benchmarks.md).
+    onnx_inference: bool = False
     # Q-reranking (paper section 4.2): every chunk is the argmax-Q of rerank_samples chunks the policy
     # draws, scored by this critic checkpoint (bboxpick-train-critic / bboxpick-train-mc-critic).
     critic_path: Path | None = None
@@ -139,6 +142,10 @@ class SuiteConfig:
             raise ValueError("guidance_scale > 0 needs critic_path (the critic whose gradient guides)")
         check_bbox_source(self.bbox_source)
         check_ray(self.ray_address)
+        if self.onnx_inference:  # before any worker starts: the missing extra named once
+            from lerobot_bboxpick.policies.bbox_diffusion.onnx_denoiser import require_onnxruntime
+
+            require_onnxruntime()
         if not 0.0 < self.noisy_iou <= 1.0:
             raise ValueError(f"noisy_iou={self.noisy_iou!r} must be in (0, 1]")
         if not isinstance(self.seed_start, int) or self.seed_start < 0:
@@ -199,6 +206,8 @@ def run_key(cfg: SuiteConfig, path: str) -> dict:
             key["num_inference_steps"] = cfg.num_inference_steps
         if cfg.policy_seed_offset:  # likewise
             key["policy_seed_offset"] = cfg.policy_seed_offset
+        if cfg.onnx_inference:  # likewise; float rounding may still tip a rare outcome
+            key["onnx_inference"] = True
         critic = critic_options(cfg)
         if critic is not None:
             key["critic"] = weights_digest(critic.pop("critic_path"))
@@ -264,6 +273,7 @@ def load_runner(
     env: Any,
     num_inference_steps: int | None = None,
     critic: dict | None = None,
+    onnx_inference: bool = False,
 ) -> Any:
     """The runner of ``path`` (``expert`` or a checkpoint), loaded once per worker process and kept;
     with ``critic`` (``critic_options``) its chunks are Q-reranked among ``rerank_samples`` draws (and
@@ -272,12 +282,15 @@ def load_runner(
 
     if path == EXPERT:
         return ExpertRunner(env)
-    key = (path, n_action_steps, num_inference_steps, json.dumps(critic, sort_keys=True))
+    key = (path, n_action_steps, num_inference_steps, json.dumps(critic, sort_keys=True), onnx_inference)
     if key not in _POLICIES:
         _POLICIES.clear()  # one checkpoint in memory per worker at a time
         with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights ..." per load
             runner = PolicyRunner.from_pretrained(
-                path, n_action_steps=n_action_steps, num_inference_steps=num_inference_steps
+                path,
+                n_action_steps=n_action_steps,
+                num_inference_steps=num_inference_steps,
+                onnx_inference=onnx_inference,
             )
         if critic is not None:
             if not hasattr(runner.policy, "chunk_selector"):
@@ -332,6 +345,7 @@ def run_episode(task: dict) -> dict:
         env,
         task.get("num_inference_steps"),
         task.get("critic"),
+        task.get("onnx_inference", False),
     )
     video = Path(task["video"]) if task.get("video") else None
     seed = task["seed"]
@@ -382,6 +396,7 @@ def _tasks(cfg: SuiteConfig, done: set[tuple[str, str, int]], keys: dict[str, di
                         "n_action_steps": cfg.n_action_steps,
                         "num_inference_steps": cfg.num_inference_steps,
                         "policy_seed_offset": cfg.policy_seed_offset,
+                        "onnx_inference": cfg.onnx_inference,
                         "critic": critic_options(cfg),
                         "run_key": keys[label],
                         "video": str(video) if k < cfg.videos else None,
