@@ -423,6 +423,14 @@ if want validation_resample16; then
   bboxpick-compare --out=docs/results/validation_resample16.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim8=docs/results/validation_ddim8;distill8=docs/results/validation_distill8"
 fi
+# The same second noise draw for the shipped checkpoint at 8 steps (rule in results.md).
+if want validation_resample8; then
+  bboxpick-suite --policies=ddim8_resampled=examples/bbox_diffusion_lego_pick --num_inference_steps=8 \
+    --episodes=30 --seed_start=5000 --videos=0 --workers=2 --policy_seed_offset=100000 --out_dir=$X/val_resample8
+  publish $X/val_resample8 validation_resample8
+  bboxpick-compare --out=docs/results/validation_resample8.md \
+    --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim8=docs/results/validation_ddim8;ddim8_resampled=docs/results/validation_resample8"
+fi
 # Progressive step distillation (issue 14's speed goal): the shipped checkpoint as its own teacher; the
 # student samples at 8 DDIM steps and learns, per step, where the teacher's two of 16 land
 # (--policy.distill_teacher_path; 1000 x 32, AdamW 1e-4, EMA, float32), then the 180 validation scenes at
