@@ -57,7 +57,7 @@ def step_pairs(student: BboxDiffusionModel, teacher: BboxDiffusionModel) -> Step
     """Match each student step with two of the teacher's steps (at twice the student's step count).
 
     Raises ValueError when the teacher's schedule does not pass through every student timestep (e.g.
-    ``leading`` spacing of 50 at 5 and 10 steps: 45, 35, ... against 45, 40, ...)."""
+    ``leading`` spacing of 50 at 7 and 14 steps: 42, 35, ... against 39, 36, ...)."""
     n = student.config.num_inference_steps
     visited = student.sampler_timesteps().tolist()
     teacher.noise_scheduler.set_timesteps(2 * n)
@@ -70,8 +70,8 @@ def step_pairs(student: BboxDiffusionModel, teacher: BboxDiffusionModel) -> Step
         if middle is None or (middle != end and teacher_next.get(middle) != end):
             raise ValueError(
                 f"num_inference_steps={n}: the teacher's {2 * n} {student.config.timestep_spacing} steps "
-                f"{teacher_visited} do not pass through the student's {visited} two by two; choose "
-                f"num_inference_steps so that num_train_timesteps // n is even (e.g. 8 or 4 of 50)"
+                f"{teacher_visited} do not pass through the student's {visited} two by two; with leading "
+                f"spacing choose n so that num_train_timesteps // n is even (8 or 4 of 50)"
             )
         starts.append(start)
         middles.append(middle)
