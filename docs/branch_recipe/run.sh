@@ -115,6 +115,11 @@ if want test; then
             suite test $name $OUT/$name/checkpoints/last/pretrained_model --seed_start=10000
     done
 fi
+# IL's own spread on the test seeds: the same checkpoint with only its noise redrawn (seed + 100000).
+if want test_il_resampled; then
+    [[ -f $DOCS/test/IL_resampled/episodes.jsonl ]] ||
+        suite test IL_resampled $CKPT --seed_start=10000 --policy_seed_offset=100000
+fi
 if want test || want table; then
     runs="IL=docs/results/recipe_seed1@bbox_diffusion"
     for name in $(ls $DOCS/test); do runs="$runs;$name=$DOCS/test/$name"; done
