@@ -91,6 +91,8 @@ def test_student_steps_pair_with_the_teachers_two_and_mismatches_are_refused():
 def test_the_config_refuses_distillation_beside_another_objective():
     with pytest.raises(ValueError, match="distill_teacher_path"):
         _policy(distill_teacher_path="a", anchor_policy_path="b")
+    with pytest.raises(ValueError, match="sampler='ddim'"):
+        _policy(distill_teacher_path="a", sampler="dpmsolver++")
 
 
 @torch.no_grad()

@@ -248,6 +248,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
                 "distill_teacher_path is set with awr_critic_path / awr_advantages_path / "
                 "anchor_policy_path / parl_cache_path: step distillation is its own objective, set one"
             )
+        if self.distill_teacher_path is not None and self.sampler != "ddim":
+            raise ValueError(
+                f"distill_teacher_path needs sampler='ddim' (it learns DDIM steps), not {self.sampler!r}"
+            )
         for name in ("awr_bc_weight", "anchor_weight"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
