@@ -11,7 +11,7 @@ import time
 import numpy as np
 import torch
 
-from lerobot_bboxpick.apps.bench import _policy_features, _preset_optimizer
+from lerobot_bboxpick.apps.bench import _policy_features, _preset_optimizer, random_training_batch
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
 
@@ -22,13 +22,7 @@ def train_rate(mode: str) -> None:
     """Print the first step's seconds and the median samples/s of the preset trained with ``mode``."""
     torch.manual_seed(0)
     inputs, outputs = _policy_features()
-    batch = {
-        "observation.images.wrist": torch.rand(BATCH, 2, 3, 224, 224),
-        "observation.state": torch.rand(BATCH, 2, 10),
-        "observation.bbox": torch.rand(BATCH, 2, 4),
-        "action": torch.rand(BATCH, 16, 10),
-        "action_is_pad": torch.zeros(BATCH, 16, dtype=torch.bool),
-    }
+    batch = random_training_batch(BATCH)
     config = BboxDiffusionConfig(device="cpu", input_features=inputs, output_features=outputs, image_size=96)
     policy = BboxDiffusionPolicy(config)
     if mode in ("unet", "unet_encoder"):

@@ -69,6 +69,20 @@ def _policy_features(image_size: int = 224) -> tuple[dict, dict]:
     return inputs, {"action": PolicyFeature(FeatureType.ACTION, (10,))}
 
 
+def random_training_batch(batch_size: int) -> dict:
+    """A training batch of random tensors in the bench's layout: two observed 224 px frames, states and
+    boxes, a 16-step action chunk (drawn from torch's global generator, in this order)."""
+    import torch
+
+    return {
+        "observation.images.wrist": torch.rand(batch_size, 2, 3, 224, 224),
+        "observation.state": torch.rand(batch_size, 2, 10),
+        "observation.bbox": torch.rand(batch_size, 2, 4),
+        "action": torch.rand(batch_size, 16, 10),
+        "action_is_pad": torch.zeros(batch_size, 16, dtype=torch.bool),
+    }
+
+
 def _time_policy(
     policy, batch: dict, obs: dict, train_steps: int = 8, chunks: int = 5
 ) -> tuple[float, float]:
@@ -120,13 +134,7 @@ def bench_policies(batch_size: int = 32, image_size: int = 96) -> str:
 
     torch.manual_seed(0)
     inputs, outputs = _policy_features()
-    batch = {
-        "observation.images.wrist": torch.rand(batch_size, 2, 3, 224, 224),
-        "observation.state": torch.rand(batch_size, 2, 10),
-        "observation.bbox": torch.rand(batch_size, 2, 4),
-        "action": torch.rand(batch_size, 16, 10),
-        "action_is_pad": torch.zeros(batch_size, 16, dtype=torch.bool),
-    }
+    batch = random_training_batch(batch_size)
     obs = {k: v[:1, -1] for k, v in batch.items() if k.startswith("observation")}
     ours = BboxDiffusionPolicy(
         BboxDiffusionConfig(
