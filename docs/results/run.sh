@@ -11,6 +11,14 @@ publish() {  # publish <suite out_dir> <docs name>
   cp "$1"/table.md "$1"/table.csv "$1"/episodes.jsonl "$1"/outcomes.png "docs/results/$2/"
 }
 want() { [ -z "${STEP:-}" ] || [ "${STEP}" = "$1" ]; }
+# validation_suite <row label> <checkpoint> <name> [bboxpick-suite options...]: the 180 validation scenes
+# (seeds 5000-5029 of every setting) into $X/val_<name>, published as docs/results/validation_<name>.
+validation_suite() {
+  local label=$1 ckpt=$2 name=$3; shift 3
+  bboxpick-suite --policies=$label=$ckpt --episodes=30 --seed_start=5000 --videos=0 --workers=2 "$@" \
+    --out_dir=$X/val_$name
+  publish $X/val_$name validation_$name
+}
 # second_seed <profile> <name> <the seed-1000 rows>: the recipe again on the same demos (collection is
 # deterministic in its seeds) with only lerobot-train's --seed changed (issue 14: two training seeds per
 # recipe); its suite on the test seeds (the float32 EMA checkpoint), compared scene by scene.
@@ -281,9 +289,7 @@ if want practical_b8_crop_test; then variant_b8_test practical_b8_crop; fi
 # rows (docs/counterfactual/val_cf/il + validation_shipped_other3): issue 14's speed goal asks for a chunk in
 # half the preset's time with no lower pick rate on validation seeds.
 if want validation_ddim16; then
-  bboxpick-suite --policies=shipped_ddim16=examples/bbox_diffusion_lego_pick --num_inference_steps=16 \
-    --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_ddim16
-  publish $X/val_ddim16 validation_ddim16
+  validation_suite shipped_ddim16 examples/bbox_diffusion_lego_pick ddim16 --num_inference_steps=16
   bboxpick-compare --out=docs/results/validation_ddim_steps.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim4=$VAL_SHIPPED"
 fi
@@ -291,9 +297,7 @@ fi
 # no lower than 16 steps' (118/180) with Wrong no higher (0) becomes the shipped config (rule in results.md).
 if want validation_ddim_fewer; then
   for n in 8 6; do
-    bboxpick-suite --policies=shipped_ddim$n=examples/bbox_diffusion_lego_pick --num_inference_steps=$n \
-      --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_ddim$n
-    publish $X/val_ddim$n validation_ddim$n
+    validation_suite shipped_ddim$n examples/bbox_diffusion_lego_pick ddim$n --num_inference_steps=$n
   done
   bboxpick-compare --out=docs/results/validation_ddim_fewer.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim8=docs/results/validation_ddim8;ddim6=docs/results/validation_ddim6"
@@ -311,9 +315,7 @@ json.dump(c, open(p, 'w'), indent=4)" $T/config.json $1
 if want validation_ddim_trailing; then
   spaced_copy trailing
   for n in 4 6; do
-    bboxpick-suite --policies=shipped_trailing$n=$X/shipped_trailing --num_inference_steps=$n \
-      --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_trailing$n
-    publish $X/val_trailing$n validation_trailing$n
+    validation_suite shipped_trailing$n $X/shipped_trailing trailing$n --num_inference_steps=$n
   done
   bboxpick-compare --out=docs/results/validation_ddim_trailing.md \
     --runs="ddim16=docs/results/validation_ddim16;trailing4=docs/results/validation_trailing4;trailing6=docs/results/validation_trailing6"
@@ -321,9 +323,7 @@ fi
 # Linspace spacing (49 ... 0): trailing's start at t = 49 and leading's last call at t = 0; 4 steps.
 if want validation_ddim_linspace; then
   spaced_copy linspace
-  bboxpick-suite --policies=shipped_linspace4=$X/shipped_linspace --num_inference_steps=4 \
-    --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_linspace4
-  publish $X/val_linspace4 validation_linspace4
+  validation_suite shipped_linspace4 $X/shipped_linspace linspace4 --num_inference_steps=4
   bboxpick-compare --out=docs/results/validation_ddim_linspace.md \
     --runs="ddim16=docs/results/validation_ddim16;linspace4=docs/results/validation_linspace4"
 fi
@@ -339,9 +339,8 @@ if want practical_halfwidth; then
     --dataset.repo_id=local/lego_pick_practical --dataset.root=outputs/practical_seed1/practical/data \
     --output_dir=$X/train_halfwidth --steps=5000 --batch_size=32 --seed=1000 --num_workers=1 \
     --save_freq=1000 --log_freq=50 --wandb.enable=false > $X/train_halfwidth.log 2>&1
-  bboxpick-suite --policies=halfwidth12=$X/train_halfwidth/checkpoints/last/pretrained_model \
-    --num_inference_steps=12 --episodes=30 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_halfwidth12
-  publish $X/val_halfwidth12 validation_halfwidth12
+  validation_suite halfwidth12 $X/train_halfwidth/checkpoints/last/pretrained_model halfwidth12 \
+    --num_inference_steps=12
   bboxpick-compare --out=docs/results/validation_halfwidth.md \
     --runs="ddim16=docs/results/validation_ddim16;halfwidth12=docs/results/validation_halfwidth12"
 fi
@@ -408,26 +407,21 @@ if want validation_fewstep6; then
   finetune_from examples/bbox_diffusion_lego_pick local/lego_pick_practical \
     outputs/practical_seed1/practical/data $X fewstep6 --policy.num_inference_steps=6 \
     --policy.train_on_sampler_timesteps=true
-  bboxpick-suite --policies=fewstep6=$X/fewstep6/checkpoints/last/pretrained_model --episodes=30 \
-    --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_fewstep6
-  publish $X/val_fewstep6 validation_fewstep6
+  validation_suite fewstep6 $X/fewstep6/checkpoints/last/pretrained_model fewstep6
   bboxpick-compare --out=docs/results/validation_fewstep6.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim6=docs/results/validation_ddim6;fewstep6=docs/results/validation_fewstep6"
 fi
 # The sampling noise's own share of the lever comparisons: the shipped checkpoint at its 16 steps on the
 # same 180 validation scenes as validation_ddim16, with only the policy's noise redrawn (seed + 100000).
 if want validation_resample16; then
-  bboxpick-suite --policies=ddim16_resampled=examples/bbox_diffusion_lego_pick --episodes=30 \
-    --seed_start=5000 --videos=0 --workers=2 --policy_seed_offset=100000 --out_dir=$X/val_resample16
-  publish $X/val_resample16 validation_resample16
+  validation_suite ddim16_resampled examples/bbox_diffusion_lego_pick resample16 --policy_seed_offset=100000
   bboxpick-compare --out=docs/results/validation_resample16.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim8=docs/results/validation_ddim8;distill8=docs/results/validation_distill8"
 fi
 # The same second noise draw for the shipped checkpoint at 8 steps (rule in results.md).
 if want validation_resample8; then
-  bboxpick-suite --policies=ddim8_resampled=examples/bbox_diffusion_lego_pick --num_inference_steps=8 \
-    --episodes=30 --seed_start=5000 --videos=0 --workers=2 --policy_seed_offset=100000 --out_dir=$X/val_resample8
-  publish $X/val_resample8 validation_resample8
+  validation_suite ddim8_resampled examples/bbox_diffusion_lego_pick resample8 --num_inference_steps=8 \
+    --policy_seed_offset=100000
   bboxpick-compare --out=docs/results/validation_resample8.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim8=docs/results/validation_ddim8;ddim8_resampled=docs/results/validation_resample8"
 fi
@@ -440,9 +434,7 @@ if want validation_distill8; then
   FINETUNE_STEPS=1000 finetune_from examples/bbox_diffusion_lego_pick local/lego_pick_practical \
     outputs/practical_seed1/practical/data $X distill8 --policy.num_inference_steps=8 \
     --policy.distill_teacher_path=examples/bbox_diffusion_lego_pick
-  bboxpick-suite --policies=distill8=$X/distill8/checkpoints/last/pretrained_model --episodes=30 \
-    --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_distill8
-  publish $X/val_distill8 validation_distill8
+  validation_suite distill8 $X/distill8/checkpoints/last/pretrained_model distill8
   bboxpick-compare --out=docs/results/validation_distill8.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim8=docs/results/validation_ddim8;distill8=docs/results/validation_distill8"
 fi
