@@ -5,7 +5,7 @@
 # The goal settings are grid_ood and random_id, where this IL policy picks 37% and 53% of test scenes.
 # Choice on validation seeds 5000-5029, then test seeds 10000-10029. Every policy runs the checkpoint's
 # own 16 DDIM steps, as the IL test rows did. Run from the repository root; STEP=<name> runs one step
-# (data, merge, dagger, dagger2, finetune, val, test, table).
+# (data, merge, dagger, dagger2, finetune, val, test, table, table_il_more).
 set -euo pipefail
 source scripts/setup.sh
 RUN=outputs/recipe_seed1/full  # STEP=recipe_seed1 of docs/results/run.sh
@@ -14,6 +14,7 @@ CF=outputs/cf_recipe
 TRAIN=outputs/branch_recipe/train
 OUT=outputs/branch_recipe
 DOCS=docs/branch_recipe
+IL_MORE=$OUT/il_more/checkpoints/last/pretrained_model  # the train-longer control, base of the last section
 STEP=${STEP:-all}
 want() { [[ $STEP == all || $STEP == "$1" ]]; }
 
@@ -83,6 +84,10 @@ if want finetune; then
             succ_dagger_s2) finetune_from $CKPT local/succ_dagger_data $OUT/succ_dagger_data $OUT $name --seed=2 ;;
             # The control: the same 600 steps on the IL policy's own demos only (what training longer gives).
             il_more) finetune_from $CKPT local/lego_pick_full $RUN/data $OUT $name ;;
+            # With il_more as the base: the branch successes (il_more_bc) against 600 more steps on the IL
+            # demos alone (il_more2), so the method is credited only with what the data adds.
+            il_more_bc) finetune_from $IL_MORE local/branch_recipe $TRAIN $OUT $name ;;
+            il_more2) finetune_from $IL_MORE local/lego_pick_full $RUN/data $OUT $name ;;
         esac
     done
 fi
@@ -124,4 +129,14 @@ if want test || want table; then
     runs="IL=docs/results/recipe_seed1@bbox_diffusion"
     for name in $(ls $DOCS/test); do runs="$runs;$name=$DOCS/test/$name"; done
     bboxpick-compare --runs="$runs" --out=$DOCS/test_table.md
+fi
+# The last section's tables, paired against il_more (the base) instead of IL.
+if want table_il_more; then
+    for split in val test; do
+        runs="il_more=$DOCS/$split/il_more"
+        for name in il_more2 il_more_bc; do
+            [[ -d $DOCS/$split/$name ]] && runs="$runs;$name=$DOCS/$split/$name"
+        done
+        bboxpick-compare --runs="$runs" --out=$DOCS/${split}_table_il_more.md
+    done
 fi
