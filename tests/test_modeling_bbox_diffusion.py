@@ -216,17 +216,19 @@ def _adamw_kwargs(preset) -> dict:
     return {"lr": preset.lr, "betas": preset.betas, "eps": preset.eps, "weight_decay": preset.weight_decay}
 
 
-def test_onnx_unet_gives_the_eager_chunk_and_follows_weight_updates():
+def test_onnx_loop_gives_the_eager_chunk_and_follows_weight_updates():
     onnx, eager = _policy(onnx_inference=True), _policy(jit_inference=False)
     batch = _batch(2)
     a, b = _chunk(onnx, batch), _chunk(eager, batch)
-    assert onnx.ema_model._onnx_unets, "onnx_inference=True did not use ONNX Runtime"
+    sessions = onnx.ema_model._onnx_sessions
+    # One graph for the whole 16-step loop at batch 2; no per-call UNet session and no trace.
+    assert list(sessions) == [("loop", 2, "DDIMScheduler", tuple(range(45, -1, -3)))]
     assert not onnx.ema_model._traced_unets
     assert a.abs().max() > 1e-3  # a real chunk, not zeros on both sides
     assert (a - b).abs().max() < 1e-4
-    session = onnx.ema_model._onnx_unets[2]
+    session = next(iter(sessions.values()))
     assert _chunk(onnx, batch).equal(a)
-    assert onnx.ema_model._onnx_unets[2] is session  # reused, not re-exported
+    assert next(iter(sessions.values())) is session  # reused, not re-exported
     # An in-place weight change (an EMA step, load_state_dict) makes the session stale: it is re-exported
     # and follows the new weights, as the eager UNet does.
     for policy in (onnx, eager):
@@ -234,10 +236,42 @@ def test_onnx_unet_gives_the_eager_chunk_and_follows_weight_updates():
             for p in policy.ema_model.unet.parameters():
                 p.mul_(1.5)
     a2, b2 = _chunk(onnx, batch), _chunk(eager, batch)
-    assert onnx.ema_model._onnx_unets[2] is not session
+    assert next(iter(sessions.values())) is not session
     assert (a2 - a).abs().max() > 1e-3  # the update changed the prediction
     assert (a2 - b2).abs().max() < 1e-4
+    # Another step count is another graph, again the eager sampler's chunk.
+    for policy in (onnx, eager):
+        policy.ema_model.config.num_inference_steps = 4  # the EMA copy samples, with its own config copy
+    assert (_chunk(onnx, batch) - _chunk(eager, batch)).abs().max() < 1e-4
+    assert len(sessions) == 2
     assert not any("onnx" in k for k in onnx.state_dict())  # the sessions are not part of a checkpoint
+
+
+def test_onnx_loop_keeps_dpm_solver_history_per_chunk():
+    """DPM-Solver++ steps with the previous outputs; exporting steps the scheduler, so its history must be
+    cleared again before the graph's chunk, and two chunks in a row must each match eager's."""
+    onnx = _policy(onnx_inference=True, sampler="dpmsolver++", num_inference_steps=6)
+    eager = _policy(jit_inference=False, sampler="dpmsolver++", num_inference_steps=6)
+    batch = _batch(1)
+    for _ in range(2):
+        assert (_chunk(onnx, batch) - _chunk(eager, batch)).abs().max() < 1e-4
+    assert [k[2] for k in onnx.ema_model._onnx_sessions] == ["DPMSolverMultistepScheduler"]
+
+
+def test_onnx_guided_sampling_runs_each_unet_call_as_a_graph():
+    """A guide is Python, so a guided chunk runs the loop here with one UNet session, as eager does."""
+    onnx = _policy(onnx_inference=True, prediction_type="sample")
+    eager = _policy(jit_inference=False, prediction_type="sample")
+    batch = _batch(2)
+
+    def guide(clean: torch.Tensor) -> torch.Tensor:
+        return 0.1 * torch.tanh(clean)  # any correction the loop must apply at every step
+
+    chunks = [p.predict_action_chunk(batch, torch.Generator().manual_seed(3), guide) for p in (onnx, eager)]
+    assert list(onnx.ema_model._onnx_sessions) == [("unet", 2)]
+    assert (chunks[0] - chunks[1]).abs().max() < 1e-4
+    unguided = eager.predict_action_chunk(batch, torch.Generator().manual_seed(3))
+    assert (chunks[1] - unguided).abs().max() > 1e-3  # the guide moved the chunk
 
 
 def test_onnx_inference_without_onnxruntime_names_the_extra(monkeypatch):

@@ -377,7 +377,7 @@ def bench_inference_levers(chunks: int = 20, threads: int | None = None) -> str:
     ratios hold; ``threads`` sets torch's thread count (None: torch's default)."""
     import torch
 
-    from lerobot_bboxpick.policies.bbox_diffusion.onnx_denoiser import require_onnxruntime
+    from lerobot_bboxpick.policies.bbox_diffusion.onnx_runtime import require_onnxruntime
 
     if threads is not None:
         torch.set_num_threads(threads)

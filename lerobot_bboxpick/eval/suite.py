@@ -143,7 +143,7 @@ class SuiteConfig:
         check_bbox_source(self.bbox_source)
         check_ray(self.ray_address)
         if self.onnx_inference:  # before any worker starts: the missing extra named once
-            from lerobot_bboxpick.policies.bbox_diffusion.onnx_denoiser import require_onnxruntime
+            from lerobot_bboxpick.policies.bbox_diffusion.onnx_runtime import require_onnxruntime
 
             require_onnxruntime()
         if not 0.0 < self.noisy_iou <= 1.0:

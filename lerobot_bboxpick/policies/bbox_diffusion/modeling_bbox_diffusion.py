@@ -40,7 +40,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     bbox_to_mask,
     mask_moments,
 )
-from lerobot_bboxpick.policies.bbox_diffusion.onnx_denoiser import OnnxDenoiser
+from lerobot_bboxpick.policies.bbox_diffusion.onnx_runtime import OnnxModule
 from lerobot_bboxpick.policies.bbox_diffusion.target_crop import TargetView
 
 log = logging.getLogger(__name__)
@@ -179,11 +179,11 @@ class BboxDiffusionModel(nn.Module):
             timestep_spacing=config.timestep_spacing,
         )
         self.sampling_scheduler = sampling_scheduler(config, self.noise_scheduler)
-        # TorchScript traces of the UNet by (device, dtype, batch) and ONNX Runtime sessions of it by
-        # batch, built on first use (see _denoiser).
-        # A plain dict, not a submodule: nothing extra in the state dict.
+        # TorchScript traces of the UNet by (device, dtype, batch) and ONNX Runtime sessions (of the
+        # UNet, or of the whole denoising loop at its timesteps) by what they were exported for, built on
+        # first use (see sample). Plain dicts, not submodules: nothing extra in the state dict.
         self._traced_unets: dict[tuple, torch.jit.ScriptModule] = {}
-        self._onnx_unets: dict[int, OnnxDenoiser] = {}
+        self._onnx_sessions: dict[tuple, OnnxModule] = {}
 
     def global_condition(self, images: Tensor, states: Tensor, bboxes: Tensor | None) -> Tensor:
         """(B, T, 3, H, W) images in [0,1], (B, T, 10) absolute poses, (B, T, 4) bboxes -> (B, cond)."""
@@ -292,6 +292,13 @@ class BboxDiffusionModel(nn.Module):
         self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
         return self.noise_scheduler.timesteps.clone()
 
+    def _onnx_session(self, key: tuple, module: nn.Module, inputs: dict[str, Tensor]) -> OnnxModule:
+        """The ONNX Runtime session for ``key``, exported from ``module`` when new or stale."""
+        session = self._onnx_sessions.get(key)
+        if session is None or session.stale:  # new, or the weights changed since its export
+            session = self._onnx_sessions[key] = OnnxModule(module, inputs)
+        return session
+
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
         """The UNet to call during sampling: in eval mode its ONNX Runtime session (``onnx_inference``,
         on a CPU) or its TorchScript trace (``jit_inference``), else the module itself. The trace holds the
@@ -300,10 +307,8 @@ class BboxDiffusionModel(nn.Module):
         if self.training or torch.is_autocast_enabled(cond.device.type):
             return self.unet
         if self.config.onnx_inference and cond.device.type == "cpu":
-            denoiser = self._onnx_unets.get(cond.shape[0])
-            if denoiser is None or denoiser.stale:  # new, or the weights changed since its export
-                denoiser = self._onnx_unets[cond.shape[0]] = OnnxDenoiser(self.unet, sample, timestep, cond)
-            return denoiser
+            inputs = {"sample": sample, "timestep": timestep, "global_cond": cond}
+            return self._onnx_session(("unet", cond.shape[0]), self.unet, inputs)
         if not self.config.jit_inference:
             return self.unet
         key = (cond.device, cond.dtype, cond.shape[0])
@@ -317,6 +322,30 @@ class BboxDiffusionModel(nn.Module):
                     self.unet, (sample, timestep, cond), check_trace=False
                 )
         return self._traced_unets[key]
+
+    def denoise(
+        self,
+        sample: Tensor,
+        cond: Tensor,
+        unet: Callable[..., Tensor],
+        guide: Guide | None = None,
+        generator: torch.Generator | None = None,
+    ) -> Tensor:
+        """Noise (B, horizon, 10) -> scaled chunk: every step of the sampling scheduler, which must be
+        set to its timesteps (``sample`` does). Deterministic for DDIM (eta 0) and DPM-Solver++."""
+        scheduler = self.sampling_scheduler
+        # DDIM clips its own x0 estimate; DPM-Solver++ has no such option, so a predicted clean
+        # chunk is clipped here, the same bound on the data the model was trained on.
+        clip_x0 = scheduler is not self.noise_scheduler and self.config.clip_sample
+        for t in scheduler.timesteps:
+            timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
+            output = unet(sample, timestep, cond)
+            if guide is not None:
+                output = output + guide(output)
+            if clip_x0 and self.config.prediction_type == "sample":
+                output = output.clamp(-self.config.clip_sample_range, self.config.clip_sample_range)
+            sample = scheduler.step(output, t, sample, generator=generator).prev_sample
+        return sample
 
     @torch.no_grad()
     def sample(
@@ -343,20 +372,31 @@ class BboxDiffusionModel(nn.Module):
         visited = self.sampler_timesteps()  # also leaves DDIM set to them
         if scheduler is not self.noise_scheduler:  # at DDIM's timesteps (timestep_spacing); clears history
             scheduler.set_timesteps(timesteps=visited.tolist())
+        eval_on_cpu = not self.training and cond.device.type == "cpu"
+        if self.config.onnx_inference and guide is None and eval_on_cpu:
+            # The whole loop as one graph at these timesteps (a guide is Python: it needs the loop below).
+            key = ("loop", cond.shape[0], type(scheduler).__name__, tuple(visited.tolist()))
+            loop = self._onnx_session(key, DenoisingLoop(self), {"sample": sample, "global_cond": cond})
+            if scheduler is not self.noise_scheduler:  # the export stepped it: clear its history again
+                scheduler.set_timesteps(timesteps=visited.tolist())
+            return self.action_scaler.inverse(loop(sample, cond))
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
         unet = self._denoiser(sample, timestep, cond)  # chosen (and traced if new) once per chunk
-        # DDIM clips its own x0 estimate; DPM-Solver++ has no such option, so a predicted clean
-        # chunk is clipped here, the same bound on the data the model was trained on.
-        clip_x0 = scheduler is not self.noise_scheduler and self.config.clip_sample
-        for t in scheduler.timesteps:
-            timestep = torch.full((cond.shape[0],), int(t), dtype=torch.long, device=cond.device)
-            output = unet(sample, timestep, cond)
-            if guide is not None:
-                output = output + guide(output)
-            if clip_x0 and self.config.prediction_type == "sample":
-                output = output.clamp(-self.config.clip_sample_range, self.config.clip_sample_range)
-            sample = scheduler.step(output, t, sample, generator=generator).prev_sample
-        return self.action_scaler.inverse(sample)
+        return self.action_scaler.inverse(self.denoise(sample, cond, unet, guide, generator))
+
+
+class DenoisingLoop(nn.Module):
+    """``BboxDiffusionModel.denoise`` with the model's UNet as a module of its own, for export: the
+    loop's parameters are the UNet's, and its scheduler steps become constants of the traced graph."""
+
+    def __init__(self, model: BboxDiffusionModel) -> None:
+        super().__init__()
+        self.unet = model.unet
+        self._denoise = model.denoise  # a bound method, not a submodule: only the UNet is exported
+
+    def forward(self, sample: Tensor, global_cond: Tensor) -> Tensor:
+        """The scaled chunk the sampler reaches from ``sample``."""
+        return self._denoise(sample, global_cond, self.unet)
 
 
 # ``(policy, observations (B, n_obs, ...), generator) -> absolute chunk (B, horizon, 10)``: how

@@ -1,9 +1,11 @@
-"""The UNet's denoising call through ONNX Runtime (``--policy.onnx_inference=true``, the ``onnx`` extra).
+"""Parts of the sampler run through ONNX Runtime (``--policy.onnx_inference=true``, the ``onnx`` extra).
 
 This small UNet's call on a CPU is bound by per-op dispatch, not arithmetic: a TorchScript trace still
-goes through PyTorch's dispatcher for each of its ops, while ONNX Runtime runs the exported graph with
-its own (partly fused) kernels: 5-29% less time per chunk here (docs/benchmarks.md, side by side).
-The session holds a copy of the weights, so it is rebuilt when any parameter has changed in place since
+goes through PyTorch's dispatcher for each of its ops, while ONNX Runtime runs an exported graph with
+its own (partly fused) kernels. The whole denoising loop (every UNet call and scheduler step of a chunk,
+unrolled at its fixed timesteps) is one graph, so no Python runs between the steps; a guided loop, whose
+guide is Python, runs each UNet call as its own graph (docs/benchmarks.md, "ONNX Runtime").
+A session holds a copy of the weights, so it is rebuilt when any parameter has changed in place since
 the export (an EMA step, ``load_state_dict``): PyTorch bumps a tensor's version counter on every in-place
 write.
 """
@@ -16,8 +18,6 @@ from typing import Any
 
 import torch
 from torch import Tensor, nn
-
-INPUT_NAMES = ("sample", "timestep", "global_cond")
 
 
 def require_onnxruntime() -> Any:
@@ -32,22 +32,27 @@ def require_onnxruntime() -> Any:
     return onnxruntime
 
 
-class OnnxDenoiser:
-    """``unet(sample, timestep, global_cond)`` for one batch size, run by an ONNX Runtime CPU session."""
+class OnnxModule:
+    """``module(*inputs)`` for inputs shaped like the example ones, run by an ONNX Runtime CPU session.
 
-    def __init__(self, unet: nn.Module, sample: Tensor, timestep: Tensor, cond: Tensor) -> None:
+    The module is traced (its Python control flow and any tensor that does not derive from the inputs
+    become constants of the graph) and must return one tensor."""
+
+    def __init__(self, module: nn.Module, inputs: dict[str, Tensor]) -> None:
         ort = require_onnxruntime()
-        self._parameters = list(unet.parameters())
+        self._input_names = tuple(inputs)
+        self._parameters = list(module.parameters())
         self._versions = self._weight_versions()
         graph = io.BytesIO()
         with torch.no_grad(), warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the TorchScript-based exporter's deprecation notice
+            # The TorchScript-based exporter's deprecation notice and its tracer's notes on constants.
+            warnings.simplefilter("ignore")
             torch.onnx.export(
-                unet,
-                (sample, timestep, cond),
+                module,
+                tuple(inputs.values()),
                 graph,
-                input_names=list(INPUT_NAMES),
-                output_names=["prediction"],
+                input_names=list(self._input_names),
+                output_names=["output"],
                 dynamo=False,  # the dynamo exporter needs onnxscript, which nothing else here uses
                 opset_version=17,
             )
@@ -56,7 +61,7 @@ class OnnxDenoiser:
         options.intra_op_num_threads = torch.get_num_threads()
         options.inter_op_num_threads = 1
         # ORT's workers busy-wait between runs by default, taking the cores from the torch ops (encoder,
-        # scheduler) that run between the UNet calls.
+        # scheduler) that run between the graph's runs.
         options.add_session_config_entry("session.intra_op.allow_spinning", "0")
         options.log_severity_level = 3  # errors only: no optimizer notes on the console
         self._session = ort.InferenceSession(graph.getvalue(), options, providers=["CPUExecutionProvider"])
@@ -69,10 +74,7 @@ class OnnxDenoiser:
         """Whether a parameter was written in place since the export (the session's copy is old)."""
         return self._weight_versions() != self._versions
 
-    def __call__(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Tensor:
-        """The UNet's prediction for ``sample`` at ``timestep`` given ``cond`` (CPU float32 tensors)."""
-        feeds = {
-            name: value.detach().numpy()
-            for name, value in zip(INPUT_NAMES, (sample, timestep, cond), strict=True)
-        }
+    def __call__(self, *inputs: Tensor) -> Tensor:
+        """The module's output for ``inputs`` (CPU float32/long tensors, in the example inputs' order)."""
+        feeds = {name: value.detach().numpy() for name, value in zip(self._input_names, inputs, strict=True)}
         return torch.from_numpy(self._session.run(None, feeds)[0])
