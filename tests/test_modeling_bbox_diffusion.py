@@ -221,29 +221,33 @@ def test_onnx_loop_gives_the_eager_chunk_and_follows_weight_updates():
     batch = _batch(2)
     a, b = _chunk(onnx, batch), _chunk(eager, batch)
     sessions = onnx.ema_model._onnx_sessions
-    # One graph for the whole 16-step loop at batch 2; no per-call UNet session and no trace.
-    assert list(sessions) == [("loop", 2, "DDIMScheduler", tuple(range(45, -1, -3)))]
+    # One graph for the encoder (2 samples x 2 frames) and one for the whole 16-step loop at batch 2; no
+    # per-call UNet session and no trace.
+    assert list(sessions) == [
+        ("encoder", (2, 2, 3, 96, 96)),
+        ("loop", 2, "DDIMScheduler", tuple(range(45, -1, -3))),
+    ]
     assert not onnx.ema_model._traced_unets
     assert a.abs().max() > 1e-3  # a real chunk, not zeros on both sides
     assert (a - b).abs().max() < 1e-4
-    session = next(iter(sessions.values()))
+    session = sessions[("encoder", (2, 2, 3, 96, 96))]
     assert _chunk(onnx, batch).equal(a)
-    assert next(iter(sessions.values())) is session  # reused, not re-exported
+    assert sessions[("encoder", (2, 2, 3, 96, 96))] is session  # reused, not re-exported
     # An in-place weight change (an EMA step, load_state_dict) makes the session stale: it is re-exported
     # and follows the new weights, as the eager UNet does.
     for policy in (onnx, eager):
         with torch.no_grad():
-            for p in policy.ema_model.unet.parameters():
+            for p in policy.ema_model.parameters():
                 p.mul_(1.5)
     a2, b2 = _chunk(onnx, batch), _chunk(eager, batch)
-    assert next(iter(sessions.values())) is not session
+    assert sessions[("encoder", (2, 2, 3, 96, 96))] is not session
     assert (a2 - a).abs().max() > 1e-3  # the update changed the prediction
     assert (a2 - b2).abs().max() < 1e-4
     # Another step count is another graph, again the eager sampler's chunk.
     for policy in (onnx, eager):
         policy.ema_model.config.num_inference_steps = 4  # the EMA copy samples, with its own config copy
     assert (_chunk(onnx, batch) - _chunk(eager, batch)).abs().max() < 1e-4
-    assert len(sessions) == 2
+    assert len(sessions) == 3
     assert not any("onnx" in k for k in onnx.state_dict())  # the sessions are not part of a checkpoint
 
 
@@ -255,7 +259,8 @@ def test_onnx_loop_keeps_dpm_solver_history_per_chunk():
     batch = _batch(1)
     for _ in range(2):
         assert (_chunk(onnx, batch) - _chunk(eager, batch)).abs().max() < 1e-4
-    assert [k[2] for k in onnx.ema_model._onnx_sessions] == ["DPMSolverMultistepScheduler"]
+    loops = [k for k in onnx.ema_model._onnx_sessions if k[0] == "loop"]
+    assert [k[2] for k in loops] == ["DPMSolverMultistepScheduler"]
 
 
 def test_onnx_guided_sampling_runs_each_unet_call_as_a_graph():
@@ -268,7 +273,7 @@ def test_onnx_guided_sampling_runs_each_unet_call_as_a_graph():
         return 0.1 * torch.tanh(clean)  # any correction the loop must apply at every step
 
     chunks = [p.predict_action_chunk(batch, torch.Generator().manual_seed(3), guide) for p in (onnx, eager)]
-    assert list(onnx.ema_model._onnx_sessions) == [("unet", 2)]
+    assert [k for k in onnx.ema_model._onnx_sessions if k[0] != "encoder"] == [("unet", 2)]
     assert (chunks[0] - chunks[1]).abs().max() < 1e-4
     unguided = eager.predict_action_chunk(batch, torch.Generator().manual_seed(3))
     assert (chunks[1] - unguided).abs().max() > 1e-3  # the guide moved the chunk
