@@ -9,6 +9,7 @@ import torch
 from lerobot_bboxpick.apps.bench import _policy_features
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+from lerobot_bboxpick.policies.bbox_diffusion.onnx_runtime import convolutions_as_2d
 
 
 def _policy(**overrides) -> BboxDiffusionPolicy:
@@ -249,6 +250,31 @@ def test_onnx_loop_gives_the_eager_chunk_and_follows_weight_updates():
     assert (_chunk(onnx, batch) - _chunk(eager, batch)).abs().max() < 1e-4
     assert len(sessions) == 3
     assert not any("onnx" in k for k in onnx.state_dict())  # the sessions are not part of a checkpoint
+
+
+def test_convolutions_as_2d_compute_the_same_and_restore_the_module():
+    """The export's 1-D -> 2-D convolution swap (ONNX Runtime's fast CPU kernels are 2-D only) computes the
+    same numbers for strided, padded, dilated, grouped and transposed convolutions, and undoes itself."""
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(
+        torch.nn.Conv1d(8, 16, 5, padding=2),
+        torch.nn.Conv1d(16, 16, 3, stride=2, padding=2, dilation=2, groups=4),
+        torch.nn.ConvTranspose1d(16, 8, 4, stride=2, padding=1),
+        torch.nn.Conv1d(8, 8, 3, padding=1, padding_mode="circular"),  # not zero-padded: kept as it is
+    )
+    x = torch.randn(3, 8, 16)
+    before = net(x)
+    with convolutions_as_2d(net):
+        assert [type(m).__name__ for m in net] == ["_Conv1dAs2d"] * 3 + ["Conv1d"]
+        assert (net(x) - before).abs().max() < 1e-5
+        assert before.abs().max() > 0.1
+    assert [type(m) for m in net] == [
+        torch.nn.Conv1d,
+        torch.nn.Conv1d,
+        torch.nn.ConvTranspose1d,
+        torch.nn.Conv1d,
+    ]
+    assert net(x).equal(before)
 
 
 def test_onnx_loop_keeps_dpm_solver_history_per_chunk():

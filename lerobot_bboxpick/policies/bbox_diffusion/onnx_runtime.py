@@ -5,6 +5,8 @@ goes through PyTorch's dispatcher for each of its ops, while ONNX Runtime runs a
 its own (partly fused) kernels. The whole denoising loop (every UNet call and scheduler step of a chunk,
 unrolled at its fixed timesteps) is one graph, so no Python runs between the steps; a guided loop, whose
 guide is Python, runs each UNet call as its own graph (docs/benchmarks.md, "ONNX Runtime").
+1-D convolutions are exported as 2-D ones over a height-1 map: ONNX Runtime's blocked (NCHWc) CPU kernels
+only take 2-D convolutions, and this UNet's calls ran 2.2x faster that way here (the same numbers).
 A session holds a copy of the weights, so it is rebuilt when any parameter has changed in place since
 the export (an EMA step, ``load_state_dict``): PyTorch bumps a tensor's version counter on every in-place
 write.
@@ -14,9 +16,12 @@ from __future__ import annotations
 
 import io
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 
@@ -32,6 +37,52 @@ def require_onnxruntime() -> Any:
     return onnxruntime
 
 
+class _Conv1dAs2d(nn.Module):
+    """A 1-D (transposed) convolution computed as a 2-D one over a height-1 map (the original's weights)."""
+
+    def __init__(self, conv: nn.Conv1d | nn.ConvTranspose1d) -> None:
+        super().__init__()
+        self.conv = conv
+
+    def forward(self, x: Tensor) -> Tensor:
+        c = self.conv
+        weight, bias = c.weight.unsqueeze(2), c.bias
+        if isinstance(c, nn.ConvTranspose1d):
+            y = F.conv_transpose2d(
+                x.unsqueeze(2), weight, bias, (1, c.stride[0]), (0, c.padding[0]),
+                (0, c.output_padding[0]), c.groups, (1, c.dilation[0]),
+            )  # fmt: skip
+        else:
+            y = F.conv2d(
+                x.unsqueeze(2),
+                weight,
+                bias,
+                (1, c.stride[0]),
+                (0, c.padding[0]),
+                (1, c.dilation[0]),
+                c.groups,
+            )
+        return y.squeeze(2)
+
+
+@contextmanager
+def convolutions_as_2d(module: nn.Module) -> Iterator[nn.Module]:
+    """``module`` with every zero-padded 1-D (transposed) convolution computed as a 2-D one, for the
+    export; the original submodules are back on exit (the parameters are the same tensors throughout)."""
+    swapped = []
+    for parent in module.modules():
+        for name, child in parent.named_children():
+            if isinstance(child, nn.Conv1d | nn.ConvTranspose1d) and child.padding_mode == "zeros":
+                swapped.append((parent, name, child))
+    try:
+        for parent, name, child in swapped:
+            setattr(parent, name, _Conv1dAs2d(child))
+        yield module
+    finally:
+        for parent, name, child in swapped:
+            setattr(parent, name, child)
+
+
 class OnnxModule:
     """``module(*inputs)`` for inputs shaped like the example ones, run by an ONNX Runtime CPU session.
 
@@ -44,7 +95,7 @@ class OnnxModule:
         self._parameters = list(module.parameters())
         self._versions = self._weight_versions()
         graph = io.BytesIO()
-        with torch.no_grad(), warnings.catch_warnings():
+        with torch.no_grad(), warnings.catch_warnings(), convolutions_as_2d(module):
             # The TorchScript-based exporter's deprecation notice and its tracer's notes on constants.
             warnings.simplefilter("ignore")
             torch.onnx.export(
