@@ -425,6 +425,16 @@ if want validation_resample8; then
   bboxpick-compare --out=docs/results/validation_resample8.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim8=docs/results/validation_ddim8;ddim8_resampled=docs/results/validation_resample8"
 fi
+# Twelve steps, both noise draws (rule in results.md): with ONNX Runtime the chunk's fewest steps that
+# might keep 16 steps' validation picks.
+if want validation_ddim12; then
+  for draw in 0 100000; do
+    validation_suite ddim12_offset$draw examples/bbox_diffusion_lego_pick ddim12_offset$draw \
+      --num_inference_steps=12 --policy_seed_offset=$draw
+  done
+  bboxpick-compare --out=docs/results/validation_ddim12.md \
+    --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim12=docs/results/validation_ddim12_offset0;ddim12_resampled=docs/results/validation_ddim12_offset100000"
+fi
 # Progressive step distillation (issue 14's speed goal): the shipped checkpoint as its own teacher; the
 # student samples at 8 DDIM steps and learns, per step, where the teacher's two of 16 land
 # (--policy.distill_teacher_path; 1000 x 32, AdamW 1e-4, EMA, float32), then the 180 validation scenes at

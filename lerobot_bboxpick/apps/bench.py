@@ -344,6 +344,12 @@ INFERENCE_LEVERS: dict[str, dict[str, Any]] = {
         "n_obs_steps": 1,
         "onnx_inference": True,
     },
+    "64 px, 1 frame, ONNX Runtime, 12 DDIM steps": {
+        "image_size": 64,
+        "n_obs_steps": 1,
+        "onnx_inference": True,
+        "num_inference_steps": 12,
+    },
     "64 px, 1 frame, half-width UNet, 16 DDIM steps": {
         "image_size": 64,
         "n_obs_steps": 1,
