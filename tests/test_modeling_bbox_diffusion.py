@@ -56,7 +56,7 @@ def test_traced_unet_gives_the_eager_chunk_and_follows_weight_updates():
 
 
 def test_training_and_autocast_keep_the_eager_unet():
-    policy = _policy(autocast_inference=True)
+    policy = _policy(autocast_inference=True, onnx_inference=True)
     batch = _batch(2)
     policy.train()
     loss, _ = policy.forward({**batch, "action": torch.rand(2, 16, 10)})
@@ -66,6 +66,7 @@ def test_training_and_autocast_keep_the_eager_unet():
     with torch.autocast("cpu", dtype=torch.bfloat16):
         _chunk(policy, batch)
     assert not policy.ema_model._traced_unets
+    assert not policy.ema_model._onnx_sessions  # ONNX Runtime graphs are float32: autocast keeps PyTorch
 
 
 def test_sampling_leaves_an_enclosing_autocast_by_default():

@@ -382,7 +382,8 @@ class BboxDiffusionModel(nn.Module):
         visited = self.sampler_timesteps()  # also leaves DDIM set to them
         if scheduler is not self.noise_scheduler:  # at DDIM's timesteps (timestep_spacing); clears history
             scheduler.set_timesteps(timesteps=visited.tolist())
-        eval_on_cpu = not self.training and cond.device.type == "cpu"
+        # As _denoiser: training and autocast keep PyTorch.
+        eval_on_cpu = not self.training and cond.device.type == "cpu" and not torch.is_autocast_enabled("cpu")
         if self.config.onnx_inference and guide is None and eval_on_cpu:
             # The whole loop as one graph at these timesteps (a guide is Python: it needs the loop below).
             key = ("loop", cond.shape[0], type(scheduler).__name__, tuple(visited.tolist()))
