@@ -435,6 +435,14 @@ if want validation_ddim12; then
   bboxpick-compare --out=docs/results/validation_ddim12.md \
     --runs="ddim16=docs/results/validation_ddim16;ddim16_resampled=docs/results/validation_resample16;ddim12=docs/results/validation_ddim12_offset0;ddim12_resampled=docs/results/validation_ddim12_offset100000"
 fi
+# The 180 test scenes at 12 steps beside the shipped export's 16-step rows (before any default changes).
+if want test_ddim12; then
+  bboxpick-suite --policies=practical12=examples/bbox_diffusion_lego_pick --episodes=30 --videos=0 --workers=2 \
+    --num_inference_steps=12 --out_dir=$X/test_ddim12
+  publish $X/test_ddim12 test_ddim12
+  bboxpick-compare --out=docs/results/test_ddim12.md \
+    --runs="ddim16=docs/results/practical_oracle@practical;ddim12=docs/results/test_ddim12"
+fi
 # Progressive step distillation (issue 14's speed goal): the shipped checkpoint as its own teacher; the
 # student samples at 8 DDIM steps and learns, per step, where the teacher's two of 16 land
 # (--policy.distill_teacher_path; 1000 x 32, AdamW 1e-4, EMA, float32), then the 180 validation scenes at
