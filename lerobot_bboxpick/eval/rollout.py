@@ -39,7 +39,7 @@ class PolicyRunner:
         """Load like ``lerobot-eval --policy.path=path``; ``n_action_steps`` overrides the steps executed
         per predicted chunk (like ``--policy.n_action_steps``), ``num_inference_steps`` the denoising
         steps per chunk (a diffusion policy's ``--policy.num_inference_steps``); ``onnx_inference`` runs a
-        ``bbox_diffusion`` UNet through ONNX Runtime (``--policy.onnx_inference=true``)."""
+        ``bbox_diffusion`` encoder and sampling loop in ONNX Runtime (``--policy.onnx_inference=true``)."""
         from lerobot.configs import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 

@@ -91,8 +91,9 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # no autocast). Same numbers (< 1e-5) in ~60% of the time on CPU, where this small UNet is bound by
     # Python dispatch; the trace shares the weights, so EMA updates and loaded checkpoints are seen.
     jit_inference: bool = True
-    # Run them through ONNX Runtime instead (the ``onnx`` extra; CPU only; eval mode, no autocast): the
-    # same chunks (< 1e-4) without PyTorch's per-op dispatch (docs/benchmarks.md, "ONNX Runtime").
+    # Run the image encoder and each chunk's whole denoising loop as ONNX Runtime graphs instead (the
+    # ``onnx`` extra; CPU only; eval mode, no autocast): the same chunks (< 1e-4) without PyTorch's per-op
+    # dispatch or Python between the steps (docs/benchmarks.md, "ONNX Runtime").
     onnx_inference: bool = False
     # ``use_amp`` is a training flag here, but lerobot-eval also samples under autocast when it is set.
     # On a CPU bf16 sampling is eager and slower than the float32 trace (docs/benchmarks.md), so
