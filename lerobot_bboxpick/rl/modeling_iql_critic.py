@@ -54,7 +54,7 @@ class PolicyObservationEncoder(nn.Module):
     """The ``bbox_diffusion`` observation path, on its own copies of the policy's modules.
 
     ``forward`` calls ``BboxDiffusionModel.global_condition`` itself (it only reads ``config``,
-    ``augment``, ``encoder``, ``target_view`` and ``obs_scaler``, which this module has under the same
+    ``augment``, ``encode_images``, ``target_view`` and ``obs_scaler``, which this module has under the same
     names), so the features cannot drift from the policy's when that code changes.
     """
 
@@ -66,6 +66,10 @@ class PolicyObservationEncoder(nn.Module):
         self.target_view = copy.deepcopy(model.target_view)
         self.augment = copy.deepcopy(model.augment)
         self.obs_scaler = copy.deepcopy(model.obs_scaler)
+
+    def encode_images(self, rgb: Tensor, mask: Tensor | None) -> Tensor:
+        """The copied encoder's features, always in PyTorch (the policy's ONNX sessions are not copied)."""
+        return self.encoder(rgb, mask)
 
     @classmethod
     def from_policy_config(cls, config: BboxDiffusionConfig) -> PolicyObservationEncoder:

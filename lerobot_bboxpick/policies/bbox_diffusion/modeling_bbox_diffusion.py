@@ -206,12 +206,12 @@ class BboxDiffusionModel(nn.Module):
             rgb, mask = self.augment(images.float(), mask, out_size=self.config.image_size)
             if self.config.mask_centroid:  # measured after the crop: consistent with the pixels
                 lowdim.append(mask_moments(mask))
-        features = self._encode(rgb, mask).view(b, t, -1).float()
+        features = self.encode_images(rgb, mask).view(b, t, -1).float()
         if self.target_view is not None:  # the raw frames: the window is cut before any crop or resize
             features = torch.cat([features, self.target_view(images, bboxes).view(b, t, -1).float()], dim=-1)
         return torch.cat([features, *lowdim], dim=-1).flatten(1)
 
-    def _encode(self, rgb: Tensor, mask: Tensor | None) -> Tensor:
+    def encode_images(self, rgb: Tensor, mask: Tensor | None) -> Tensor:
         """The main encoder's features: in eval mode on a CPU with ``onnx_inference``, its ONNX Runtime
         session (the same numbers; the backbone's per-op dispatch is most of its time at 64 px)."""
         eager = self.training or rgb.device.type != "cpu" or torch.is_autocast_enabled("cpu")
