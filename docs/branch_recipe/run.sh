@@ -5,7 +5,7 @@
 # The goal settings are grid_ood and random_id, where this IL policy picks 37% and 53% of test scenes.
 # Choice on validation seeds 5000-5029, then test seeds 10000-10029. Every policy runs the checkpoint's
 # own 16 DDIM steps, as the IL test rows did. Run from the repository root; STEP=<name> runs one step
-# (data, merge, dagger, dagger2, finetune, val, test, table, table_il_more).
+# (data, data_own, merge, merge_own, dagger, dagger2, finetune, val, test, table, table_il_more).
 set -euo pipefail
 source scripts/setup.sh
 RUN=outputs/recipe_seed1/full  # STEP=recipe_seed1 of docs/results/run.sh
@@ -36,6 +36,22 @@ if want merge; then
     bboxpick-branch-advantages --data_dir=$CF --dataset_root=$TRAIN --out=$OUT/advantages.json
     cp $OUT/advantages.json $DOCS/advantages.json
     cp $CF/summary.md $DOCS/branch_summary.md
+fi
+
+# 2a. The same branch data from il_more's own rollouts (the last section's first untried item): its branches,
+#     merged after the IL demos, are what il_more does and what then picks, not what the weaker IL did.
+CF_OWN=outputs/cf_il_more
+TRAIN_OWN=$OUT/train_own
+if want data_own; then
+    bboxpick-counterfactual --policy_path=$IL_MORE --settings=grid_ood,random_id --episodes=8 --seed_start=1000 \
+        --samples=3 --num_inference_steps=16 --out_dir=$CF_OWN --workers=2 --success_demos=true
+    cp $CF_OWN/summary.md $DOCS/branch_summary_il_more.md
+fi
+if want merge_own; then
+    rm -rf $TRAIN_OWN
+    lerobot-edit-dataset --new_repo_id=local/branch_recipe_own --new_root=$TRAIN_OWN --operation.type=merge \
+        --operation.repo_ids="['local/lego_pick_full', 'local/counterfactual_successes']" \
+        --operation.roots="['$RUN/data', '$CF_OWN/success_demos']" > $OUT.merge_own.log 2>&1
 fi
 
 # 2b. Recovery labels where the branches have none: the IL policy drives on training seeds 4000+ of the goal
@@ -88,6 +104,8 @@ if want finetune; then
             # demos alone (il_more2), so the method is credited only with what the data adds.
             il_more_bc) finetune_from $IL_MORE local/branch_recipe $TRAIN $OUT $name ;;
             il_more2) finetune_from $IL_MORE local/lego_pick_full $RUN/data $OUT $name ;;
+            # From il_more, the IL demos + the picking branches of il_more's own rollouts (step 2a).
+            il_more_own) finetune_from $IL_MORE local/branch_recipe_own $TRAIN_OWN $OUT $name ;;
         esac
     done
 fi
@@ -134,7 +152,7 @@ fi
 if want table_il_more; then
     for split in val test; do
         runs="il_more=$DOCS/$split/il_more"
-        for name in il_more2 il_more_bc; do
+        for name in il_more2 il_more_bc il_more_own; do
             [[ -d $DOCS/$split/$name ]] && runs="$runs;$name=$DOCS/$split/$name"
         done
         bboxpick-compare --runs="$runs" --out=$DOCS/${split}_table_il_more.md

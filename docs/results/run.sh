@@ -443,6 +443,22 @@ if want test_ddim12; then
   bboxpick-compare --out=docs/results/test_ddim12.md \
     --runs="ddim16=docs/results/practical_oracle@practical;ddim12=docs/results/test_ddim12"
 fi
+# The shipped checkpoint at 12 DDIM steps (its default from 2026-12-06) with the tracker's box, then
+# pile_id again with the policy's noise redrawn (seed + 100000), oracle and tracked box, so the tracked
+# box's pile_id change is read over 60 scenes rather than 30.
+if want test_tracked12; then
+  bboxpick-suite --policies=practical12=examples/bbox_diffusion_lego_pick --bbox_source=tracked --episodes=30 \
+    --videos=0 --workers=2 --num_inference_steps=12 --out_dir=$X/test_tracked12
+  publish $X/test_tracked12 test_tracked12
+  for source in oracle tracked; do
+    bboxpick-suite --policies=practical12=examples/bbox_diffusion_lego_pick --bbox_source=$source --episodes=30 \
+      --videos=0 --workers=2 --num_inference_steps=12 --settings=pile_id --policy_seed_offset=100000 \
+      --out_dir=$X/test_pile_redraw12_$source
+    publish $X/test_pile_redraw12_$source test_pile_redraw12_$source
+  done
+  bboxpick-compare --out=docs/results/test_tracked12.md \
+    --runs="oracle=docs/results/test_ddim12;tracked=docs/results/test_tracked12;oracle_redrawn=docs/results/test_pile_redraw12_oracle;tracked_redrawn=docs/results/test_pile_redraw12_tracked"
+fi
 # Progressive step distillation (issue 14's speed goal): the shipped checkpoint as its own teacher; the
 # student samples at 8 DDIM steps and learns, per step, where the teacher's two of 16 land
 # (--policy.distill_teacher_path; 1000 x 32, AdamW 1e-4, EMA, float32), then the 180 validation scenes at
