@@ -218,7 +218,7 @@ class BboxDiffusionModel(nn.Module):
         if not self.config.onnx_inference or eager:
             return self.encoder(rgb, mask)
         inputs = {"rgb": rgb} if mask is None or not self.encoder.use_mask else {"rgb": rgb, "mask": mask}
-        session = self._onnx_session(("encoder", tuple(rgb.shape)), self.encoder, inputs)
+        session, _ = self._onnx_session(("encoder", tuple(rgb.shape)), lambda: self.encoder, inputs)
         return session(*inputs.values())
 
     def backbone_parameters(self) -> list[nn.Parameter]:
@@ -302,12 +302,16 @@ class BboxDiffusionModel(nn.Module):
         self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
         return self.noise_scheduler.timesteps.clone()
 
-    def _onnx_session(self, key: tuple, module: nn.Module, inputs: dict[str, Tensor]) -> OnnxModule:
-        """The ONNX Runtime session for ``key``, exported from ``module`` when new or stale."""
+    def _onnx_session(
+        self, key: tuple, module: Callable[[], nn.Module], inputs: dict[str, Tensor]
+    ) -> tuple[OnnxModule, bool]:
+        """The ONNX Runtime session for ``key`` and whether it was exported by this call: exported from
+        ``module()`` when new or stale (a factory, so a wrapper module is only built for an export)."""
         session = self._onnx_sessions.get(key)
         if session is None or session.stale:  # new, or the weights changed since its export
-            session = self._onnx_sessions[key] = OnnxModule(module, inputs)
-        return session
+            session = self._onnx_sessions[key] = OnnxModule(module(), inputs)
+            return session, True
+        return session, False
 
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
         """The UNet to call during sampling: in eval mode its ONNX Runtime session (``onnx_inference``,
@@ -318,7 +322,7 @@ class BboxDiffusionModel(nn.Module):
             return self.unet
         if self.config.onnx_inference and cond.device.type == "cpu":
             inputs = {"sample": sample, "timestep": timestep, "global_cond": cond}
-            return self._onnx_session(("unet", cond.shape[0]), self.unet, inputs)
+            return self._onnx_session(("unet", cond.shape[0]), lambda: self.unet, inputs)[0]
         if not self.config.jit_inference:
             return self.unet
         key = (cond.device, cond.dtype, cond.shape[0])
@@ -387,8 +391,9 @@ class BboxDiffusionModel(nn.Module):
         if self.config.onnx_inference and guide is None and eval_on_cpu:
             # The whole loop as one graph at these timesteps (a guide is Python: it needs the loop below).
             key = ("loop", cond.shape[0], type(scheduler).__name__, tuple(visited.tolist()))
-            loop = self._onnx_session(key, DenoisingLoop(self), {"sample": sample, "global_cond": cond})
-            if scheduler is not self.noise_scheduler:  # the export stepped it: clear its history again
+            inputs = {"sample": sample, "global_cond": cond}
+            loop, exported = self._onnx_session(key, lambda: DenoisingLoop(self), inputs)
+            if exported and scheduler is not self.noise_scheduler:  # the export stepped it: clear its history
                 scheduler.set_timesteps(timesteps=visited.tolist())
             return self.action_scaler.inverse(loop(sample, cond))
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import io
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any
 
 import torch
@@ -87,15 +87,17 @@ class OnnxModule:
     """``module(*inputs)`` for inputs shaped like the example ones, run by an ONNX Runtime CPU session.
 
     The module is traced (its Python control flow and any tensor that does not derive from the inputs
-    become constants of the graph) and must return one tensor."""
+    become constants of the graph) and must return one tensor. ``convs_as_2d=False`` exports 1-D
+    convolutions as they are (for comparison: docs/benchmarks/probe_onnx_conv2d.py)."""
 
-    def __init__(self, module: nn.Module, inputs: dict[str, Tensor]) -> None:
+    def __init__(self, module: nn.Module, inputs: dict[str, Tensor], *, convs_as_2d: bool = True) -> None:
         ort = require_onnxruntime()
         self._input_names = tuple(inputs)
         self._parameters = list(module.parameters())
         self._versions = self._weight_versions()
         graph = io.BytesIO()
-        with torch.no_grad(), warnings.catch_warnings(), convolutions_as_2d(module):
+        export_module = convolutions_as_2d(module) if convs_as_2d else nullcontext(module)
+        with torch.no_grad(), warnings.catch_warnings(), export_module:
             # The TorchScript-based exporter's deprecation notice and its tracer's notes on constants.
             warnings.simplefilter("ignore")
             torch.onnx.export(
