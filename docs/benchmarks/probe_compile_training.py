@@ -1,6 +1,8 @@
-"""Probe (2026-12-06): does torch.compile speed up the CPU preset's float32 training step?
+"""Probe (2026-12-06): does torch.compile, or the encoder in channels-last layout, speed up the CPU preset's
+float32 training step?
 
-``python docs/benchmarks/probe_compile_training.py eager unet unet_encoder eager``: the preset (96 px,
+``python docs/benchmarks/probe_compile_training.py eager unet unet_encoder eager`` (or ``eager channels_last
+eager``): the preset (96 px,
 batch 32, random tensors, as ``bench --policies``) trained 12 steps per mode, eager first and last to
 bracket the machine's drift; prints the first step (compilation) and the median of the last 10.
 """
@@ -29,6 +31,11 @@ def train_rate(mode: str) -> None:
         policy.model.unet = torch.compile(policy.model.unet)
     if mode == "unet_encoder":
         policy.model.encoder = torch.compile(policy.model.encoder)
+    if mode == "channels_last":  # oneDNN's convolutions in NHWC: the backbone's weights and its input
+        backbone = policy.model.encoder.backbone.to(memory_format=torch.channels_last)
+        backbone.register_forward_pre_hook(
+            lambda _, args: (args[0].contiguous(memory_format=torch.channels_last),)
+        )
     optimiser = _preset_optimizer(policy)
     policy.train()
     times = []
