@@ -135,7 +135,8 @@ fi
 if want test; then
     for name in ${TEST_POLICIES:-succ_bc awr_t01}; do
         [[ -f $DOCS/test/$name/episodes.jsonl ]] ||
-            suite test $name $OUT/$name/checkpoints/last/pretrained_model --seed_start=10000
+            suite test $name $OUT/$name/checkpoints/last/pretrained_model --seed_start=10000 \
+                ${TEST_SETTINGS:+--settings=$TEST_SETTINGS}  # default: all six settings
     done
 fi
 # IL's own spread on the test seeds: the same checkpoint with only its noise redrawn (seed + 100000).
