@@ -218,7 +218,7 @@ class BboxDiffusionModel(nn.Module):
         if not self.config.onnx_inference or eager:
             return self.encoder(rgb, mask)
         inputs = {"rgb": rgb} if mask is None or not self.encoder.use_mask else {"rgb": rgb, "mask": mask}
-        session, _ = self._onnx_session(("encoder", tuple(rgb.shape)), lambda: self.encoder, inputs)
+        session = self._onnx_session(("encoder", tuple(rgb.shape)), lambda: self.encoder, inputs)
         return session(*inputs.values())
 
     def backbone_parameters(self) -> list[nn.Parameter]:
@@ -302,16 +302,23 @@ class BboxDiffusionModel(nn.Module):
         self.noise_scheduler.set_timesteps(self.config.num_inference_steps)
         return self.noise_scheduler.timesteps.clone()
 
+    def reset_sampler(self) -> Tensor:
+        """Set the sampling scheduler to DDIM's timesteps (``sampler_timesteps``), which clears
+        DPM-Solver++'s per-chunk history, and return them; ``denoise`` steps from here."""
+        visited = self.sampler_timesteps()
+        if self.sampling_scheduler is not self.noise_scheduler:
+            self.sampling_scheduler.set_timesteps(timesteps=visited.tolist())
+        return visited
+
     def _onnx_session(
         self, key: tuple, module: Callable[[], nn.Module], inputs: dict[str, Tensor]
-    ) -> tuple[OnnxModule, bool]:
-        """The ONNX Runtime session for ``key`` and whether it was exported by this call: exported from
-        ``module()`` when new or stale (a factory, so a wrapper module is only built for an export)."""
+    ) -> OnnxModule:
+        """The ONNX Runtime session for ``key``: exported from ``module()`` when new or stale (a factory,
+        so a wrapper module is only built for an export)."""
         session = self._onnx_sessions.get(key)
         if session is None or session.stale:  # new, or the weights changed since its export
             session = self._onnx_sessions[key] = OnnxModule(module(), inputs)
-            return session, True
-        return session, False
+        return session
 
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
         """The UNet to call during sampling: in eval mode its ONNX Runtime session (``onnx_inference``,
@@ -322,7 +329,7 @@ class BboxDiffusionModel(nn.Module):
             return self.unet
         if self.config.onnx_inference and cond.device.type == "cpu":
             inputs = {"sample": sample, "timestep": timestep, "global_cond": cond}
-            return self._onnx_session(("unet", cond.shape[0]), lambda: self.unet, inputs)[0]
+            return self._onnx_session(("unet", cond.shape[0]), lambda: self.unet, inputs)
         if not self.config.jit_inference:
             return self.unet
         key = (cond.device, cond.dtype, cond.shape[0])
@@ -382,20 +389,18 @@ class BboxDiffusionModel(nn.Module):
             device=cond.device,
             dtype=cond.dtype,
         )
-        scheduler = self.sampling_scheduler
-        visited = self.sampler_timesteps()  # also leaves DDIM set to them
-        if scheduler is not self.noise_scheduler:  # at DDIM's timesteps (timestep_spacing); clears history
-            scheduler.set_timesteps(timesteps=visited.tolist())
         # As _denoiser: training and autocast keep PyTorch.
         eval_on_cpu = not self.training and cond.device.type == "cpu" and not torch.is_autocast_enabled("cpu")
         if self.config.onnx_inference and guide is None and eval_on_cpu:
-            # The whole loop as one graph at these timesteps (a guide is Python: it needs the loop below).
-            key = ("loop", cond.shape[0], type(scheduler).__name__, tuple(visited.tolist()))
+            # The whole loop as one graph (a guide is Python: it needs the loop below). Its scheduler steps
+            # are constants of the graph, so the Python scheduler is set only for an export (DenoisingLoop);
+            # the step count is the rest of the timesteps' key (the spacing is fixed at construction).
+            name = type(self.sampling_scheduler).__name__
+            key = ("loop", cond.shape[0], name, self.config.num_inference_steps)
             inputs = {"sample": sample, "global_cond": cond}
-            loop, exported = self._onnx_session(key, lambda: DenoisingLoop(self), inputs)
-            if exported and scheduler is not self.noise_scheduler:  # the export stepped it: clear its history
-                scheduler.set_timesteps(timesteps=visited.tolist())
+            loop = self._onnx_session(key, lambda: DenoisingLoop(self), inputs)
             return self.action_scaler.inverse(loop(sample, cond))
+        self.reset_sampler()
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
         unet = self._denoiser(sample, timestep, cond)  # chosen (and traced if new) once per chunk
         return self.action_scaler.inverse(self.denoise(sample, cond, unet, guide, generator))
@@ -407,6 +412,7 @@ class DenoisingLoop(nn.Module):
 
     def __init__(self, model: BboxDiffusionModel) -> None:
         super().__init__()
+        model.reset_sampler()  # the export traces one chunk, stepping the scheduler from its first timestep
         self.unet = model.unet
         self._denoise = model.denoise  # a bound method, not a submodule: only the UNet is exported
 
@@ -433,6 +439,10 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         self.model = BboxDiffusionModel(config)
         # EMA copy used for inference (UMI); saved with the checkpoint beside the trained weights.
         self.ema_model = deepcopy(self.model).requires_grad_(False) if config.use_ema else None
+        if self.ema_model is not None:
+            # One config for the policy and both models: deepcopy gave the EMA model its own, so a setting
+            # changed on a live policy (num_inference_steps, onnx_inference) missed the model that samples.
+            self.ema_model.config = config
         self._ema_updates = 0
         self.chunk_selector: ChunkSelector | None = None
         # The advantage-weighted objective (rl.advantage_weighting), built on the first training batch
