@@ -266,6 +266,26 @@ def test_onnx_loop_gives_the_eager_chunk_and_follows_weight_updates():
     assert not any("onnx" in k for k in onnx.state_dict())  # the sessions are not part of a checkpoint
 
 
+def test_reset_in_eval_mode_exports_the_onnx_graphs_before_the_first_chunk():
+    """LeRobot's rollout resets the policy before an episode: with onnx_inference the export happens
+    there, and the episode's first chunk reuses those sessions (the same objects) with eager's numbers."""
+    training = _policy(onnx_inference=True).train()
+    training.reset()
+    assert not training.ema_model._onnx_sessions  # train mode (as in __init__, before weights load): none
+    onnx, eager = _policy(onnx_inference=True), _policy(jit_inference=False)
+    onnx.reset()
+    sessions = dict(onnx.ema_model._onnx_sessions)
+    assert [k[0] for k in sessions] == ["encoder", "loop"]
+    assert not onnx._actions and not any(onnx._queues.values())  # the queues are left empty
+    batch = {k: v[:, -1] for k, v in _batch(1).items()}  # one observation, as select_action receives it
+    for policy in (onnx, eager):
+        policy.reset()
+        policy.select_action(batch, generator=torch.Generator().manual_seed(3))
+    assert all(onnx.ema_model._onnx_sessions[k] is v for k, v in sessions.items())  # not exported again
+    assert len(onnx.ema_model._onnx_sessions) == 2
+    assert (onnx._actions[0] - eager._actions[0]).abs().max() < 1e-4
+
+
 def test_convolutions_as_2d_compute_the_same_and_restore_the_module():
     """The export's 1-D -> 2-D convolution swap (ONNX Runtime's fast CPU kernels are 2-D only) computes the
     same numbers for strided, padded, dilated, grouped and transposed convolutions, and undoes itself."""

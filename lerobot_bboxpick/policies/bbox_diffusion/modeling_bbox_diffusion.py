@@ -486,12 +486,36 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         return self.ema_model if self.ema_model is not None else self.model
 
     def reset(self) -> None:
-        """Clear the observation history and the action queue (call at every episode start)."""
+        """Clear the observation history and the action queue (call at every episode start). In eval mode
+        with ``onnx_inference`` it also warms up (``warm_up``): LeRobot's rollout and eval loops reset
+        before an episode, so the graphs' export (seconds) happens there, not at the episode's first step."""
         keys = [OBS_STATE, self.config.image_key]
         if self.config.bbox_mode != "none":
             keys.append(self.config.bbox_feature_key)
         self._queues = {k: deque(maxlen=self.config.n_obs_steps) for k in keys}
         self._actions: deque[Tensor] = deque()
+        # Not in train mode: __init__ resets before from_pretrained loads the weights (and sets eval).
+        if self.config.onnx_inference and not self.training:
+            self.warm_up()
+
+    @torch.no_grad()
+    def warm_up(self, batch_size: int = 1) -> None:
+        """Sample one chunk from a placeholder observation of the configured shapes, so that what the first
+        real chunk would build (ONNX Runtime sessions, TorchScript traces) exists; nothing is built again
+        while it is current. The observation queues and the action queue are left untouched."""
+        device = torch.device(self.config.device or "cpu")
+        shapes = {key: feature.shape for key, feature in self.config.input_features.items()}
+        t = self.config.n_obs_steps
+        batch = {self.config.image_key: torch.full((batch_size, t, *shapes[self.config.image_key]), 0.5)}
+        pose = torch.zeros(10)
+        pose[[3, 7]] = 1.0  # the identity rotation in 6D (its first two rows): a valid pose
+        batch[OBS_STATE] = pose.expand(batch_size, t, 10)
+        if self.config.bbox_mode != "none":
+            batch[self.config.bbox_feature_key] = torch.tensor([0.25, 0.25, 0.75, 0.75]).expand(
+                batch_size, t, 4
+            )
+        model = self._inference_model().eval()
+        model.sample({k: v.to(device) for k, v in batch.items()})
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
         """Training loss: the denoising loss, the step-distillation loss when the config names a teacher
