@@ -273,7 +273,9 @@ def test_reset_in_eval_mode_exports_the_onnx_graphs_before_the_first_chunk():
     training.reset()
     assert not training.ema_model._onnx_sessions  # train mode (as in __init__, before weights load): none
     onnx, eager = _policy(onnx_inference=True), _policy(jit_inference=False)
+    before = torch.get_rng_state()
     onnx.reset()
+    assert torch.get_rng_state().equal(before)  # its placeholder chunk draws its own noise
     sessions = dict(onnx.ema_model._onnx_sessions)
     assert [k[0] for k in sessions] == ["encoder", "loop"]
     assert not onnx._actions and not any(onnx._queues.values())  # the queues are left empty

@@ -515,7 +515,8 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
                 batch_size, t, 4
             )
         model = self._inference_model().eval()
-        model.sample({k: v.to(device) for k, v in batch.items()})
+        own_noise = torch.Generator(device).manual_seed(0)  # leaves torch's global random state alone
+        model.sample({k: v.to(device) for k, v in batch.items()}, generator=own_noise)
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, dict]:
         """Training loss: the denoising loss, the step-distillation loss when the config names a teacher
