@@ -378,6 +378,8 @@ if want practical_b8_lateturn_test; then variant_b8_test practical_b8_lateturn; 
 # on the practical recipe's 180 demos of every layout, trained as practical_b8.
 if want practical_b8_paperinput; then
   variant_b8 practical_b8_paperinput $PRACTICAL 0.3 --policy.image_size=96 --policy.n_obs_steps=2
+  bboxpick-compare --by=target_yaw --out=docs/results/validation_practical_b8_paperinput_yaw.md \
+    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_paperinput=docs/results/validation_practical_b8_paperinput"
 fi
 if want practical_b8_paperinput_test; then variant_b8_test practical_b8_paperinput; fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
