@@ -380,6 +380,9 @@ if want practical_b8_paperinput; then
   variant_b8 practical_b8_paperinput $PRACTICAL 0.3 --policy.image_size=96 --policy.n_obs_steps=2
   bboxpick-compare --by=target_yaw --out=docs/results/validation_practical_b8_paperinput_yaw.md \
     --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_paperinput=docs/results/validation_practical_b8_paperinput"
+  lerobot_bboxpick trace --policy $X/train_practical_b8_paperinput/checkpoints/last/pretrained_model \
+    --setting random_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out docs/results/trace_practical_b8_paperinput_random_id.md
 fi
 if want practical_b8_paperinput_test; then variant_b8_test practical_b8_paperinput; fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
