@@ -288,6 +288,31 @@ def test_reset_in_eval_mode_exports_the_onnx_graphs_before_the_first_chunk():
     assert (onnx._actions[0] - eager._actions[0]).abs().max() < 1e-4
 
 
+def test_reset_samples_no_placeholder_chunk_while_the_onnx_sessions_are_current(monkeypatch):
+    """Once the sessions exist, an episode's reset costs nothing; a new step count (a new loop graph) or
+    changed weights (stale sessions) make the next reset warm up again."""
+    onnx = _policy(onnx_inference=True)
+    onnx.reset()
+    chunks = []
+    original = type(onnx.ema_model).sample
+    monkeypatch.setattr(
+        type(onnx.ema_model), "sample", lambda self, *a, **k: chunks.append(1) or original(self, *a, **k)
+    )
+    onnx.reset()
+    assert chunks == []
+    onnx.config.num_inference_steps = 3
+    onnx.reset()
+    assert chunks == [1] and len(onnx.ema_model._onnx_sessions) == 3  # the 3-step loop beside the old one
+    onnx.reset()
+    assert chunks == [1]
+    with torch.no_grad():
+        next(onnx.ema_model.unet.parameters()).mul_(1.01)  # as an EMA update or a loaded state dict would
+    onnx.reset()
+    assert chunks == [1, 1] and onnx.ema_model.has_current_onnx_sessions(1)
+    onnx.reset()  # the 16-step loop left stale beside them is not the one the next chunk uses
+    assert chunks == [1, 1]
+
+
 def test_convolutions_as_2d_compute_the_same_and_restore_the_module():
     """The export's 1-D -> 2-D convolution swap (ONNX Runtime's fast CPU kernels are 2-D only) computes the
     same numbers for strided, padded, dilated, grouped and transposed convolutions, and undoes itself."""

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from copy import deepcopy
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from diffusers.schedulers.scheduling_ddim import DDIMScheduler
@@ -28,7 +29,7 @@ from lerobot.policies.utils import populate_queues
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_bboxpick.geometry import absolute_pose10_torch, relative_pose10_torch
+from lerobot_bboxpick.geometry import absolute_pose10_torch, mat_to_pose9, relative_pose10_torch
 from lerobot_bboxpick.latency import fresh_steps, observation_time
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
     BboxDiffusionConfig,
@@ -320,6 +321,19 @@ class BboxDiffusionModel(nn.Module):
             session = self._onnx_sessions[key] = OnnxModule(module(), inputs)
         return session
 
+    def _loop_key(self, batch_size: int) -> tuple:
+        """The ONNX loop session's key: its scheduler steps are constants of the graph, so the sampler and
+        the step count are part of it (the spacing is fixed at construction)."""
+        name = type(self.sampling_scheduler).__name__
+        return ("loop", batch_size, name, self.config.num_inference_steps)
+
+    def has_current_onnx_sessions(self, batch_size: int) -> bool:
+        """Whether a chunk of ``batch_size`` on the ONNX path would export nothing: the encoder's and the
+        loop's sessions for it exist and no weight changed since their export."""
+        encoders = [s for k, s in self._onnx_sessions.items() if k[0] == "encoder" and k[1][0] == batch_size]
+        loop = self._onnx_sessions.get(self._loop_key(batch_size))
+        return bool(encoders) and loop is not None and not any(s.stale for s in [*encoders, loop])
+
     def _denoiser(self, sample: Tensor, timestep: Tensor, cond: Tensor) -> Callable[..., Tensor]:
         """The UNet to call during sampling: in eval mode its ONNX Runtime session (``onnx_inference``,
         on a CPU) or its TorchScript trace (``jit_inference``), else the module itself. The trace holds the
@@ -395,10 +409,8 @@ class BboxDiffusionModel(nn.Module):
             # The whole loop as one graph (a guide is Python: it needs the loop below). Its scheduler steps
             # are constants of the graph, so the Python scheduler is set only for an export (DenoisingLoop);
             # the step count is the rest of the timesteps' key (the spacing is fixed at construction).
-            name = type(self.sampling_scheduler).__name__
-            key = ("loop", cond.shape[0], name, self.config.num_inference_steps)
             inputs = {"sample": sample, "global_cond": cond}
-            loop = self._onnx_session(key, lambda: DenoisingLoop(self), inputs)
+            loop = self._onnx_session(self._loop_key(cond.shape[0]), lambda: DenoisingLoop(self), inputs)
             return self.action_scaler.inverse(loop(sample, cond))
         self.reset_sampler()
         timestep = torch.zeros(cond.shape[0], dtype=torch.long, device=cond.device)
@@ -503,18 +515,19 @@ class BboxDiffusionPolicy(PreTrainedPolicy):
         """Sample one chunk from a placeholder observation of the configured shapes, so that what the first
         real chunk would build (ONNX Runtime sessions, TorchScript traces) exists; nothing is built again
         while it is current. The observation queues and the action queue are left untouched."""
+        model = self._inference_model().eval()
+        if self.config.onnx_inference and model.has_current_onnx_sessions(batch_size):
+            return  # an episode's reset after the first: the next chunk reuses them
         device = torch.device(self.config.device or "cpu")
-        shapes = {key: feature.shape for key, feature in self.config.input_features.items()}
         t = self.config.n_obs_steps
-        batch = {self.config.image_key: torch.full((batch_size, t, *shapes[self.config.image_key]), 0.5)}
-        pose = torch.zeros(10)
-        pose[[3, 7]] = 1.0  # the identity rotation in 6D (its first two rows): a valid pose
-        batch[OBS_STATE] = pose.expand(batch_size, t, 10)
+        image_shape = self.config.input_features[self.config.image_key].shape
+        batch = {self.config.image_key: torch.full((batch_size, t, *image_shape), 0.5)}
+        identity = np.append(mat_to_pose9(np.eye(4)), 0.0)  # a valid pose10: identity pose, gripper 0
+        batch[OBS_STATE] = torch.as_tensor(identity, dtype=torch.float32).expand(batch_size, t, 10)
         if self.config.bbox_mode != "none":
             batch[self.config.bbox_feature_key] = torch.tensor([0.25, 0.25, 0.75, 0.75]).expand(
                 batch_size, t, 4
             )
-        model = self._inference_model().eval()
         own_noise = torch.Generator(device).manual_seed(0)  # leaves torch's global random state alone
         model.sample({k: v.to(device) for k, v in batch.items()}, generator=own_noise)
 
