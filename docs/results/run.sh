@@ -385,12 +385,24 @@ if want practical_b8_paperinput; then
     --out docs/results/trace_practical_b8_paperinput_random_id.md
 fi
 if want practical_b8_paperinput_test; then variant_b8_test practical_b8_paperinput; fi
+# The gripper's height above the table as an input (--policy.height_input=true; issue 14): the one-frame
+# policies close 13-42 mm high over turned bricks, and with UMI's relative poses their height can only come
+# from the picture. The practical recipe's 180 demos, trained as practical_b8 with this one change.
+if want practical_b8_height; then
+  variant_b8 practical_b8_height $PRACTICAL 0.3 $FAST_INPUT --policy.height_input=true
+  bboxpick-compare --by=target_yaw --out=docs/results/validation_practical_b8_height_yaw.md \
+    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_height=docs/results/validation_practical_b8_height"
+  lerobot_bboxpick trace --policy $X/train_practical_b8_height/checkpoints/last/pretrained_model \
+    --setting random_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out docs/results/trace_practical_b8_height_random_id.md
+fi
+if want practical_b8_height_test; then variant_b8_test practical_b8_height; fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
 # paper protocol's two-frame 96 px policy (grid demos only), the shipped checkpoint, the batch-8 variants.
 if want target_yaw; then
   runs="paper_protocol=docs/results/recipe_oracle@bbox_diffusion;shipped=docs/results/practical_oracle@practical"
   for name in practical_b8 practical_b8_crop practical_b8_norecovery practical_b8_rec06 practical_b8_seed1 \
-    practical_b8_lateturn practical_b8_paperinput \
+    practical_b8_lateturn practical_b8_paperinput practical_b8_height \
     practical_b8_obs2; do
     [ -f docs/results/$name/episodes.jsonl ] && runs="$runs;$name=docs/results/$name"
   done

@@ -71,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--out", type=Path, default=Path("outputs/bench/env.md"))
     bench.add_argument("--policies", action="store_true", help="also time bbox_diffusion and stock diffusion")
     bench.add_argument(
+        "--policy-steps", type=_positive, default=8, help="timed training steps per policy for --policies"
+    )
+    bench.add_argument(
         "--collect", action="store_true", help="also time bboxpick-collect with 1 and 2 workers"
     )
     bench.add_argument("--suite", action="store_true", help="also time bboxpick-suite on a CPU-preset policy")
@@ -132,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.policies:
             from lerobot_bboxpick.apps.bench import bench_policies
 
-            table += "\n\n" + bench_policies()
+            table += "\n\n" + bench_policies(training_steps=args.policy_steps)
         if args.training:
             from lerobot_bboxpick.apps.bench import bench_training_levers
 

@@ -58,6 +58,16 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # target's image position directly instead of making it find the mask through the CNN.
     # Only used with bbox_mode="mask": the ablation modes have no mask, so it is turned off for them.
     mask_centroid: bool = True
+    # Also condition on the gripper's height above the table: the observed TCP z (observation.state[2])
+    # minus ``table_height`` (the table top's z in the state's frame: the robot base on a UR5, the world
+    # in lego_pick, whose table top is at 0), divided by ``height_input_scale``, per observed frame.
+    # UMI's poses are all relative to the current one, so a one-frame policy's height above the brick
+    # can only come from the picture, where a turned brick looks nearer than an aligned one
+    # (docs/results.md, "turned targets"). Off by default: it needs a state frame fixed to the table,
+    # which lerobot_bboxpick's sim and a mounted UR5 have and hand-held UMI data has not.
+    height_input: bool = False
+    table_height: float = 0.0
+    height_input_scale: float = 0.15
     # timm backbone by name; pretrained weights are loaded by timm (fails clearly when they cannot be).
     backbone: str = "resnet18"
     pretrained_backbone: bool = False
@@ -205,6 +215,8 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"bbox_mode={self.bbox_mode!r} is not one of {', '.join(BBOX_MODES)}")
         if self.bbox_mode != "mask":
             self.mask_centroid = False  # no mask to measure (see the field)
+        if not self.height_input_scale > 0.0:
+            raise ValueError(f"height_input_scale={self.height_input_scale!r} must be > 0 (metres)")
         if self.pooling not in ("default", "spatial_softmax"):
             raise ValueError(f"pooling={self.pooling!r} must be 'default' or 'spatial_softmax'")
         self.down_dims = tuple(self.down_dims)

@@ -98,9 +98,11 @@ def _set_rng_states(states: list[Tensor], devices: list[torch.device]) -> None:
 
 
 def global_condition_dim(config: BboxDiffusionConfig, image_feature_dim: int) -> int:
-    """Width of the UNet's global condition: per observed step, the image feature, the scaled pose10 and
-    (with ``lowdim`` bbox mode or the mask centroid) the 4 box numbers."""
-    lowdim = 10 + (4 if config.bbox_mode == "lowdim" or config.mask_centroid else 0)
+    """Width of the UNet's global condition: per observed step, the image feature, the scaled pose10,
+    (with ``lowdim`` bbox mode or the mask centroid) the 4 box numbers and (``height_input``) the height."""
+    lowdim = (
+        10 + (4 if config.bbox_mode == "lowdim" or config.mask_centroid else 0) + int(config.height_input)
+    )
     return config.n_obs_steps * (image_feature_dim + lowdim)
 
 
@@ -196,6 +198,8 @@ class BboxDiffusionModel(nn.Module):
             states = states.float()
             rel_states = relative_pose10_torch(states, states[:, -1])
             lowdim = [self.obs_scaler(rel_states)]
+            if self.config.height_input:
+                lowdim.append((states[..., 2:3] - self.config.table_height) / self.config.height_input_scale)
             mask = None
             if self.config.bbox_mode == "mask":
                 # The mask is drawn at the camera resolution before any crop/resize, so augmentation

@@ -1,0 +1,56 @@
+"""The height input (``height_input``): the gripper's height above the table reaches the policy's condition,
+which UMI's relative poses alone cannot carry for a one-frame policy."""
+
+import pytest
+import torch
+
+from lerobot_bboxpick.apps.bench import _policy_features
+from lerobot_bboxpick.geometry import mat_to_pose9
+from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
+
+
+def _model(**overrides):
+    torch.manual_seed(0)
+    inputs, outputs = _policy_features(image_size=64)
+    config = BboxDiffusionConfig(
+        device="cpu",
+        input_features=inputs,
+        output_features=outputs,
+        image_size=64,
+        n_obs_steps=1,
+        **overrides,
+    )
+    return BboxDiffusionPolicy(config).eval().model
+
+
+def _condition(model, tcp_z: float) -> torch.Tensor:
+    """The global condition of one observation: the same picture and box, the TCP at ``tcp_z`` metres."""
+    import numpy as np
+
+    pose = np.eye(4)
+    pose[:3, 3] = (0.45, 0.0, tcp_z)
+    state = torch.tensor([*mat_to_pose9(pose), 0.08], dtype=torch.float32).view(1, 1, 10)
+    image = torch.rand(1, 1, 3, 64, 64, generator=torch.Generator().manual_seed(2))
+    bbox = torch.tensor([0.4, 0.4, 0.6, 0.6]).view(1, 1, 4)
+    with torch.no_grad():
+        return model.global_condition(image, state, bbox)
+
+
+def test_height_reaches_the_condition_only_with_height_input():
+    """Without it, a one-frame policy's condition is the same 2 cm and 20 cm above the table (its poses are
+    relative to the current one); with it, one entry differs by the height change over the scale."""
+    plain = _model()
+    assert (_condition(plain, 0.02) - _condition(plain, 0.20)).abs().max() == 0
+    model = _model(height_input=True, table_height=0.01, height_input_scale=0.15)
+    low, high = _condition(model, 0.02), _condition(model, 0.20)
+    assert low.shape[1] == _condition(plain, 0.02).shape[1] + 1
+    differs = (low - high).abs() > 1e-6
+    assert differs.sum() == 1
+    assert float((high - low)[differs]) == pytest.approx(0.18 / 0.15, abs=1e-5)
+    assert float(low[differs]) == pytest.approx((0.02 - 0.01) / 0.15, abs=1e-5)
+
+
+def test_a_non_positive_height_scale_names_the_field():
+    with pytest.raises(ValueError, match=r"height_input_scale=0\.0 must be > 0"):
+        BboxDiffusionConfig(height_input=True, height_input_scale=0.0)
