@@ -1,33 +1,22 @@
 """The height input (``height_input``): the gripper's height above the table reaches the policy's condition,
 which UMI's relative poses alone cannot carry for a one-frame policy."""
 
+import numpy as np
 import pytest
 import torch
 
-from lerobot_bboxpick.apps.bench import _policy_features
+from lerobot_bboxpick.apps.bench import _lever_policy
 from lerobot_bboxpick.geometry import mat_to_pose9
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
-from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionPolicy
 
 
 def _model(**overrides):
-    torch.manual_seed(0)
-    inputs, outputs = _policy_features(image_size=64)
-    config = BboxDiffusionConfig(
-        device="cpu",
-        input_features=inputs,
-        output_features=outputs,
-        image_size=64,
-        n_obs_steps=1,
-        **overrides,
-    )
-    return BboxDiffusionPolicy(config).eval().model
+    """A randomly initialised one-frame 64 px policy's model (the shipped design), in eval mode."""
+    return _lever_policy({"image_size": 64, "n_obs_steps": 1, **overrides}).eval().model
 
 
 def _condition(model, tcp_z: float) -> torch.Tensor:
     """The global condition of one observation: the same picture and box, the TCP at ``tcp_z`` metres."""
-    import numpy as np
-
     pose = np.eye(4)
     pose[:3, 3] = (0.45, 0.0, tcp_z)
     state = torch.tensor([*mat_to_pose9(pose), 0.08], dtype=torch.float32).view(1, 1, 10)

@@ -258,6 +258,14 @@ variant_b8() {  # variant_b8 <name> <repo_id> <root> <recovery> [policy options]
   suite_b8 val $name
   compare_b8 val $name
 }
+turned_targets() {  # turned_targets <name>: its validation rows by the target's turn beside practical_b8's,
+  # and where it closes the gripper on random_id validation scenes 5000-5009 (lerobot_bboxpick trace)
+  bboxpick-compare --by=target_yaw --out=docs/results/validation_$1_yaw.md \
+    --runs="practical_b8=docs/results/validation_practical_b8;$1=docs/results/validation_$1"
+  lerobot_bboxpick trace --policy $X/train_$1/checkpoints/last/pretrained_model \
+    --setting random_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out docs/results/trace_$1_random_id.md
+}
 variant_b8_test() {  # variant_b8_test <name>: its test rows, likewise
   suite_b8 test $1
   compare_b8 test $1
@@ -378,11 +386,7 @@ if want practical_b8_lateturn_test; then variant_b8_test practical_b8_lateturn; 
 # on the practical recipe's 180 demos of every layout, trained as practical_b8.
 if want practical_b8_paperinput; then
   variant_b8 practical_b8_paperinput $PRACTICAL 0.3 --policy.image_size=96 --policy.n_obs_steps=2
-  bboxpick-compare --by=target_yaw --out=docs/results/validation_practical_b8_paperinput_yaw.md \
-    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_paperinput=docs/results/validation_practical_b8_paperinput"
-  lerobot_bboxpick trace --policy $X/train_practical_b8_paperinput/checkpoints/last/pretrained_model \
-    --setting random_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
-    --out docs/results/trace_practical_b8_paperinput_random_id.md
+  turned_targets practical_b8_paperinput
 fi
 if want practical_b8_paperinput_test; then variant_b8_test practical_b8_paperinput; fi
 # The gripper's height above the table as an input (--policy.height_input=true; issue 14): the one-frame
@@ -390,11 +394,7 @@ if want practical_b8_paperinput_test; then variant_b8_test practical_b8_paperinp
 # from the picture. The practical recipe's 180 demos, trained as practical_b8 with this one change.
 if want practical_b8_height; then
   variant_b8 practical_b8_height $PRACTICAL 0.3 $FAST_INPUT --policy.height_input=true
-  bboxpick-compare --by=target_yaw --out=docs/results/validation_practical_b8_height_yaw.md \
-    --runs="practical_b8=docs/results/validation_practical_b8;practical_b8_height=docs/results/validation_practical_b8_height"
-  lerobot_bboxpick trace --policy $X/train_practical_b8_height/checkpoints/last/pretrained_model \
-    --setting random_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
-    --out docs/results/trace_practical_b8_height_random_id.md
+  turned_targets practical_b8_height
 fi
 if want practical_b8_height_test; then variant_b8_test practical_b8_height; fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
