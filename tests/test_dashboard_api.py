@@ -32,6 +32,7 @@ from lerobot_bboxpick.apps.dashboard.server import LIVE_VIEWS, create_app, main
 from lerobot_bboxpick.apps.dashboard.session import DashboardSession
 from lerobot_bboxpick.apps.dashboard.views import decode_jpeg
 from lerobot_bboxpick.apps.dashboard.worker import SimWorker
+from lerobot_bboxpick.apps.main_job import SHIPPED_CHECKPOINT
 from lerobot_bboxpick.data.tracking import bbox_iou
 from lerobot_bboxpick.sim.env import LegoPickEnv
 from lerobot_bboxpick.sim.layouts import SETTINGS
@@ -137,6 +138,12 @@ def test_shipped_checkpoint_listed_only_when_present(tmp_path: Path) -> None:
         (folder / name).write_text("{}")
     assert [c.id for c in catalog.choices()] == ["expert", "shipped"]
     assert catalog.resolve("shipped").path == folder.resolve()
+    # With the first shipped checkpoint beside the current one, "shipped" is the main job's current one.
+    current = examples / SHIPPED_CHECKPOINT.name
+    current.mkdir()
+    for name in ("config.json", "model.safetensors"):
+        (current / name).write_text("{}")
+    assert catalog.resolve("shipped").path == current.resolve()
 
 
 def test_state_and_frames_before_a_scene(fresh_client: TestClient) -> None:

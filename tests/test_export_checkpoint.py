@@ -67,3 +67,14 @@ def test_bad_sources_are_refused(tmp_path, trained):
         ExportConfig(src=tmp_path, dst=tmp_path / "x")
     with pytest.raises(ValueError, match="must differ from src"):
         ExportConfig(src=trained, dst=trained)
+    with pytest.raises(ValueError, match="num_inference_steps=0"):
+        ExportConfig(src=trained, dst=tmp_path / "x", num_inference_steps=0)
+
+
+def test_export_writes_a_given_step_count_and_keeps_the_trained_one_otherwise(trained, tmp_path):
+    trained_steps = json.loads((trained / "config.json").read_text())["num_inference_steps"]
+    export(ExportConfig(src=trained, dst=tmp_path / "kept"))
+    export(ExportConfig(src=trained, dst=tmp_path / "more", num_inference_steps=trained_steps + 3))
+    kept = BboxDiffusionPolicy.from_pretrained(tmp_path / "kept").config.num_inference_steps
+    more = BboxDiffusionPolicy.from_pretrained(tmp_path / "more").config.num_inference_steps
+    assert (kept, more) == (trained_steps, trained_steps + 3)

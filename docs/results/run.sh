@@ -397,12 +397,31 @@ if want practical_b8_height; then
   turned_targets practical_b8_height
 fi
 if want practical_b8_height_test; then variant_b8_test practical_b8_height; fi
+# It joined the practical profile by its pre-written rule (validation 88% against 61%) and ships: exported as
+# examples/bbox_diffusion_lego_pick_height (EMA weights, float16, the 4 DDIM steps its rows were measured at
+# written into its config), evaluated as shipped on the test scenes with the oracle box and the tracker's.
+if want shipped_height; then
+  bboxpick-export --src=$X/train_practical_b8_height/checkpoints/last/pretrained_model \
+    --dst=examples/bbox_diffusion_lego_pick_height --half=true --num_inference_steps=4
+  for source in oracle tracked; do
+    bboxpick-suite --policies=shipped=examples/bbox_diffusion_lego_pick_height --bbox_source=$source \
+      --episodes=30 --seed_start=10000 --videos=0 --workers=2 --out_dir=$X/test_shipped_height_$source
+    publish $X/test_shipped_height_$source shipped_height_$source
+  done
+  bboxpick-compare --out=docs/results/shipped_height.md --runs="float32=docs/results/practical_b8_height;\
+exported=docs/results/shipped_height_oracle;exported, tracked box=docs/results/shipped_height_tracked"
+fi
+# Its second training seed (the same demos; only lerobot-train's --seed differs), test rows only.
+if want practical_b8_height_seed1; then
+  train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1
+  variant_b8_test practical_b8_height_seed1
+fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
 # paper protocol's two-frame 96 px policy (grid demos only), the shipped checkpoint, the batch-8 variants.
 if want target_yaw; then
   runs="paper_protocol=docs/results/recipe_oracle@bbox_diffusion;shipped=docs/results/practical_oracle@practical"
   for name in practical_b8 practical_b8_crop practical_b8_norecovery practical_b8_rec06 practical_b8_seed1 \
-    practical_b8_lateturn practical_b8_paperinput practical_b8_height \
+    practical_b8_lateturn practical_b8_paperinput practical_b8_height practical_b8_height_seed1 \
     practical_b8_obs2; do
     [ -f docs/results/$name/episodes.jsonl ] && runs="$runs;$name=docs/results/$name"
   done

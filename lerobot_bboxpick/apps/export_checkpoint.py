@@ -2,6 +2,7 @@
 
     bboxpick-export --src <run>/checkpoints/last/pretrained_model --dst examples/bbox_diffusion_lego_pick
     bboxpick-export ... --half=true        # weights stored as float16 (loaded back into float32)
+    bboxpick-export ... --num_inference_steps=4   # the sampling its suite table was measured with
 
 A trained ``bbox_diffusion`` checkpoint holds the trained weights *and* their EMA copy, which is what
 inference uses. The export keeps only the EMA weights, written as the policy's own weights with
@@ -34,9 +35,14 @@ class ExportConfig:
     dst: Path = Path("outputs/export")
     # Store the weights as float16 (half the size); they load back into float32.
     half: bool = False
+    # DDIM steps per chunk written into the export's config (the step count its table was measured at, when
+    # the suite sampled with another than training's); None keeps the trained config's.
+    num_inference_steps: int | None = None
 
     def __post_init__(self) -> None:
         self.src, self.dst = Path(self.src), Path(self.dst)
+        if self.num_inference_steps is not None and self.num_inference_steps < 1:
+            raise ValueError(f"num_inference_steps={self.num_inference_steps} must be a positive step count")
         if not (self.src / "config.json").is_file() or not (self.src / WEIGHTS).is_file():
             raise ValueError(f"src={self.src} is not a checkpoint folder (config.json and {WEIGHTS})")
         if self.dst.resolve() == self.src.resolve():
@@ -69,6 +75,8 @@ def export(cfg: ExportConfig) -> Path:
     # CPU that emulates bf16) and the folder it was loaded from on the training machine.
     config["use_amp"] = False
     config["pretrained_path"] = None
+    if cfg.num_inference_steps is not None:
+        config["num_inference_steps"] = cfg.num_inference_steps
     (cfg.dst / "config.json").write_text(json.dumps(config, indent=4))
     out = cfg.dst / WEIGHTS
     save_file({k: v.contiguous() for k, v in weights.items()}, out)

@@ -17,7 +17,7 @@ import sys
 import numpy as np
 import torch
 
-from lerobot_bboxpick.apps.main_job import SHIPPED_CHECKPOINT
+from lerobot_bboxpick.apps.main_job import FIRST_SHIPPED_CHECKPOINT
 from lerobot_bboxpick.eval.rollout import PolicyRunner, rollout
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import sampling_scheduler
 
@@ -68,7 +68,7 @@ def main() -> None:
     """Print the markdown table of the module docstring."""
     torch.set_num_threads(1)
     with contextlib.redirect_stdout(sys.stderr):  # LeRobot's loader prints; stdout is the table
-        runner = PolicyRunner.from_pretrained(SHIPPED_CHECKPOINT)
+        runner = PolicyRunner.from_pretrained(FIRST_SHIPPED_CHECKPOINT)
     batches = chunk_observations(runner)
     converged = chunk_positions(runner, batches, "ddim", 50)
     print(f"{len(batches)} chunk observations x {DRAWS} noise draws; error against 50-step DDIM, mm\n")

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from lerobot_bboxpick.apps.dashboard.errors import RequestError
+from lerobot_bboxpick.apps.main_job import SHIPPED_CHECKPOINT
 
 EXPERT = "expert"
 SHIPPED = "shipped"
@@ -62,7 +63,11 @@ class PolicyCatalog:
         self._runners: dict[tuple[Path, int], Any] = {}
 
     def shipped(self) -> Path | None:
-        """The checkpoint under ``examples/``, if the repository has one."""
+        """The checkpoint under ``examples/``, if the repository has one: the main job's shipped one where
+        it is there, else the first found."""
+        preferred = self.examples_dir / SHIPPED_CHECKPOINT.name
+        if (preferred / "config.json").is_file():
+            return preferred
         found = find_checkpoints(self.examples_dir, limit=1) if self.examples_dir.is_dir() else []
         return found[0] if found else None
 
