@@ -60,7 +60,9 @@ from lerobot_bboxpick.sim.outcome import OUTCOMES
 log = logging.getLogger(__name__)
 POINTS_DIR = "points"
 CONFIG_NAME = "config.json"
-SHIPPED_CHECKPOINT = Path("examples/bbox_diffusion_lego_pick")
+# The first shipped checkpoint, the imitation policy docs/counterfactual measured: the default keeps their
+# commands reproducible (the current shipped one is main_job.SHIPPED_CHECKPOINT).
+IMITATION_CHECKPOINT = Path("examples/bbox_diffusion_lego_pick")
 
 
 @dataclass
@@ -68,7 +70,7 @@ class CounterfactualConfig:
     """Options of ``bboxpick-counterfactual``."""
 
     # The bbox_diffusion checkpoint that proposes chunks and finishes every branch.
-    policy_path: Path = SHIPPED_CHECKPOINT
+    policy_path: Path = IMITATION_CHECKPOINT
     settings: str = ",".join(SETTINGS)
     # Episodes per setting, on seeds seed_start, seed_start + 1, ... (training seeds only).
     episodes: int = 4
