@@ -32,8 +32,8 @@ from lerobot_bboxpick.apps.dashboard.server import LIVE_VIEWS, create_app, main
 from lerobot_bboxpick.apps.dashboard.session import DashboardSession
 from lerobot_bboxpick.apps.dashboard.views import decode_jpeg
 from lerobot_bboxpick.apps.dashboard.worker import SimWorker
-from lerobot_bboxpick.apps.main_job import SHIPPED_CHECKPOINT
 from lerobot_bboxpick.data.tracking import bbox_iou
+from lerobot_bboxpick.shipped_checkpoints import SHIPPED_CHECKPOINT
 from lerobot_bboxpick.sim.env import LegoPickEnv
 from lerobot_bboxpick.sim.layouts import SETTINGS
 from lerobot_bboxpick.sim.scene import N_BRICKS

@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from lerobot_bboxpick.apps.main_job import FIRST_SHIPPED_CHECKPOINT
 from lerobot_bboxpick.eval.rollout import PolicyRunner
 from lerobot_bboxpick.eval.sampler_error import chunk_positions, error_mm
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.shipped_checkpoints import FIRST_SHIPPED_CHECKPOINT
 from lerobot_bboxpick.sim.env import LegoPickEnv
 
 CHECKPOINT = Path(__file__).resolve().parents[1] / FIRST_SHIPPED_CHECKPOINT

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from lerobot_bboxpick.apps.main_job import SHIPPED_CHECKPOINT
 from lerobot_bboxpick.eval.rollout import PolicyRunner, rollout
+from lerobot_bboxpick.shipped_checkpoints import SHIPPED_CHECKPOINT
 
 CHECKPOINT = Path(__file__).resolve().parents[1] / SHIPPED_CHECKPOINT
 # A test scene the shipped checkpoint picks in its suite table (examples/.../README.md), with the

@@ -31,6 +31,7 @@ from tqdm import tqdm
 
 from lerobot_bboxpick import seeds
 from lerobot_bboxpick.precision import PrecisionChoice, choose_precision
+from lerobot_bboxpick.shipped_checkpoints import SHIPPED_CHECKPOINT
 from lerobot_bboxpick.sim.layouts import SETTINGS
 
 CALIBRATION_STEPS = 40  # the first steps of the real run; their rate sizes the rest
@@ -365,12 +366,6 @@ def run_pipeline(profile_name: str = "quick", out_dir: Path = Path("outputs/main
     return table
 
 
-SHIPPED_CHECKPOINT = Path("examples/bbox_diffusion_lego_pick_height")  # the practical recipe: its README.md
-# The first shipped checkpoint (no height input): the imitation policy that docs/counterfactual, docs/dagger
-# and the sampler study measured, kept so that their commands still reproduce.
-FIRST_SHIPPED_CHECKPOINT = Path("examples/bbox_diffusion_lego_pick")
-
-
 def what_next(table: Path, checkpoint: Path) -> str:
     """The closing message of the main job: where its artefacts are and what to run next."""
     suite = table.parent
@@ -387,7 +382,7 @@ def what_next(table: Path, checkpoint: Path) -> str:
         "--out_dir=outputs/suite_shipped",
         f"  lerobot-eval --policy.path={SHIPPED_CHECKPOINT} --env.type=lego_pick --env.setting=random_id "
         "--eval.n_episodes=10 --eval.batch_size=1",
-        "  # the recipe that made the shipped checkpoint (about 45 minutes on 2 cores) and its 6 x 30 suite:",
+        "  # the recipe that made the shipped checkpoint (45-60 minutes on 2 cores) and its 6 x 30 suite:",
         "  bash scripts/main.sh --profile practical",
         "  # the paper protocol (grid demos only, about 90 minutes):",
         "  bash scripts/main.sh --profile full",

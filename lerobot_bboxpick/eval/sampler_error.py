@@ -17,9 +17,9 @@ import sys
 import numpy as np
 import torch
 
-from lerobot_bboxpick.apps.main_job import FIRST_SHIPPED_CHECKPOINT
 from lerobot_bboxpick.eval.rollout import PolicyRunner, rollout
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import sampling_scheduler
+from lerobot_bboxpick.shipped_checkpoints import FIRST_SHIPPED_CHECKPOINT
 
 DRAWS = 16
 

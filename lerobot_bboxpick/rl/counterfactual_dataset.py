@@ -54,23 +54,22 @@ from lerobot_bboxpick.rl.chunk_perturbations import parse_perturbations
 from lerobot_bboxpick.rl.counterfactual import restore, run_branch, snapshot
 from lerobot_bboxpick.rl.critic_dataset import GROUP_OF_OUTCOME, CriticDataConfig
 from lerobot_bboxpick.rl.rerank import sample_chunks
+from lerobot_bboxpick.shipped_checkpoints import FIRST_SHIPPED_CHECKPOINT
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
 from lerobot_bboxpick.sim.outcome import OUTCOMES
 
 log = logging.getLogger(__name__)
 POINTS_DIR = "points"
 CONFIG_NAME = "config.json"
-# The first shipped checkpoint, the imitation policy docs/counterfactual measured: the default keeps their
-# commands reproducible (the current shipped one is main_job.SHIPPED_CHECKPOINT).
-IMITATION_CHECKPOINT = Path("examples/bbox_diffusion_lego_pick")
 
 
 @dataclass
 class CounterfactualConfig:
     """Options of ``bboxpick-counterfactual``."""
 
-    # The bbox_diffusion checkpoint that proposes chunks and finishes every branch.
-    policy_path: Path = IMITATION_CHECKPOINT
+    # The bbox_diffusion checkpoint that proposes chunks and finishes every branch (default: the imitation
+    # policy docs/counterfactual measured, so their commands reproduce).
+    policy_path: Path = FIRST_SHIPPED_CHECKPOINT
     settings: str = ",".join(SETTINGS)
     # Episodes per setting, on seeds seed_start, seed_start + 1, ... (training seeds only).
     episodes: int = 4

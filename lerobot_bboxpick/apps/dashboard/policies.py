@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from lerobot_bboxpick.apps.dashboard.errors import RequestError
-from lerobot_bboxpick.apps.main_job import SHIPPED_CHECKPOINT
+from lerobot_bboxpick.shipped_checkpoints import SHIPPED_CHECKPOINT
 
 EXPERT = "expert"
 SHIPPED = "shipped"
