@@ -101,6 +101,26 @@ if want validation_quick_batch; then
     publish $X/val_$1 validation_quick_$1
   done
 fi
+# The quick profile's recipe with the gripper's height as an input (what the practical profile gained
+# from it): the same 60 grid demos, batch 8 x 2900, both training seeds, the 20 grid_id validation scenes
+# of validation_quick_batch; the 1600-step checkpoint (the slowest machine's 9 minutes; the cosine schedule
+# is the 2900-step one's, so a quick look only) on the same scenes. Rule in results.md.
+if want validation_quick_height; then
+  X=outputs/exp
+  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
+    --workers=2 --resume=true
+  for run in "b8_height 1000" "b8_height_seed1 1"; do
+    set -- $run
+    [ -f $X/train_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
+      --policy.type=bbox_diffusion --policy.device=cpu --policy.use_amp=false --policy.image_size=64 \
+      --policy.n_obs_steps=1 --policy.scheduler_warmup_steps=100 --policy.height_input=true \
+      --dataset.repo_id=local/grid60 --dataset.root=$X/grid60 --output_dir=$X/train_$1 --steps=2900 \
+      --batch_size=8 --num_workers=1 --save_freq=1600 --log_freq=20 --wandb.enable=false --seed=$2
+    bboxpick-suite --policies=$1=$X/train_$1/checkpoints/last/pretrained_model,${1}_1600=$X/train_$1/checkpoints/001600/pretrained_model \
+      --settings=grid_id --episodes=20 --seed_start=5000 --videos=0 --workers=2 --out_dir=$X/val_$1
+    publish $X/val_$1 validation_quick_$1
+  done
+fi
 # The practical recipe (every layout, 30% recovery demos, fast encoder, 160,000 samples), exported as
 # the shipped checkpoint (EMA weights, float16) and evaluated as shipped; then its inference-step levers
 # on validation seeds.
