@@ -241,8 +241,10 @@ VAL_SHIPPED="docs/counterfactual/val_cf/il,docs/results/validation_shipped_other
 TEST_SHIPPED="docs/counterfactual/test_cf/il,docs/counterfactual/test_cf/il_other3"
 practical_data() {  # practical_data <repo_id> <root> <recovery fraction>: the 180 demos of every layout
   # (EXPERT_TURN=late: the expert turns the gripper above the brick instead of on the way)
+  # (DEMO_SETTINGS / DEMO_EPISODES: another mix of layouts; the seed modulo their count picks the layout)
   bboxpick-collect --repo_id=$1 --root=$2 \
-    --settings=grid_id,grid_ood,pile_id,random_id,identical_2,identical_4 --episodes=180 --recovery=$3 \
+    --settings=${DEMO_SETTINGS:-grid_id,grid_ood,pile_id,random_id,identical_2,identical_4} \
+    --episodes=${DEMO_EPISODES:-180} --recovery=$3 \
     --workers=2 --resume=true ${EXPERT_TURN:+--expert_turn=$EXPERT_TURN}
 }
 train_b8() {  # train_b8 <name> <repo_id> <root> [policy options]: batch 8 x B8_STEPS, float32
@@ -431,6 +433,27 @@ if want shipped_height; then
   done
   bboxpick-compare --out=docs/results/shipped_height.md --runs="float32=docs/results/practical_b8_height;\
 exported=docs/results/shipped_height_oracle;exported, tracked box=docs/results/shipped_height_tracked"
+fi
+# Where the shipped checkpoint closes on pile_id validation scenes 5000-5009 (7 of them stacked targets);
+# then the height recipe with three times the pile demos (240 demos: the six layouts' cycle with pile_id
+# twice more, so 90 pile demos and 30 of each other layout; 30% recoveries), the same 96,000 samples.
+# Rule in results.md.
+PRACTICAL_PILE="local/lego_pick_practical_pile $X/practical240_pile"
+if want practical_b8_height_pile; then
+  lerobot_bboxpick trace --policy examples/bbox_diffusion_lego_pick_height --setting pile_id \
+    --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --out docs/results/trace_shipped_height_pile_id.md
+  DEMO_SETTINGS=grid_id,grid_ood,pile_id,random_id,identical_2,identical_4,pile_id,pile_id DEMO_EPISODES=240 \
+    variant_b8 practical_b8_height_pile $PRACTICAL_PILE 0.3 $FAST_INPUT --policy.height_input=true
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_pile_vs_height.md \
+    --runs="height=docs/results/validation_practical_b8_height;height_pile=docs/results/validation_practical_b8_height_pile"
+  lerobot_bboxpick trace --policy $X/train_practical_b8_height_pile/checkpoints/last/pretrained_model \
+    --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out docs/results/trace_practical_b8_height_pile_pile_id.md
+fi
+if want practical_b8_height_pile_test; then
+  variant_b8_test practical_b8_height_pile
+  bboxpick-compare --out=docs/results/practical_b8_height_pile_vs_height.md \
+    --runs="height=docs/results/practical_b8_height;height_pile=docs/results/practical_b8_height_pile"
 fi
 # Its second training seed (the same demos; only lerobot-train's --seed differs), test rows only.
 if want practical_b8_height_seed1; then
