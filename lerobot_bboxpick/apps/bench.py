@@ -109,7 +109,10 @@ def _interleaved_training_rates(policies: dict[str, Any], batch: dict, steps: in
     return {name: len(batch["action"]) / float(np.median(ts)) for name, ts in times.items()}
 
 
-def _chunk_ms(policy: Any, obs: dict, chunks: int = 5) -> float:
+CHUNKS_TIMED = 5  # chunks per inference median (after one warm-up chunk)
+
+
+def _chunk_ms(policy: Any, obs: dict, chunks: int = CHUNKS_TIMED) -> float:
     """Median ms for one full action chunk (encoder + DDIM) from an empty action queue."""
     import torch
 
@@ -182,7 +185,7 @@ def bench_policies(batch_size: int = 32, image_size: int = 96, training_steps: i
     lines = [
         f"Precision: {choice.reason}.\n",
         f"Training: the median of {training_steps} steps per policy on random tensors, the two policies' "
-        "steps taken in turn; inference: the median of 5 chunks.\n",
+        f"steps taken in turn; inference: the median of {CHUNKS_TIMED} chunks.\n",
         f"| policy ({image_size} px input, batch {batch_size}) | precision | train samples/s | ms per "
         "16-step DDIM chunk | trainable params (M) |",
         "|---|---|---|---|---|",
