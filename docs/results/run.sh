@@ -455,6 +455,17 @@ if want practical_b8_height_pile_test; then
   bboxpick-compare --out=docs/results/practical_b8_height_pile_vs_height.md \
     --runs="height=docs/results/practical_b8_height;height_pile=docs/results/practical_b8_height_pile"
 fi
+# The height recipe with two observed frames (the parallax between them measures how far the brick is),
+# on the 180 demos. Rule in results.md.
+if want practical_b8_height_obs2; then
+  variant_b8 practical_b8_height_obs2 $PRACTICAL 0.3 --policy.image_size=64 --policy.n_obs_steps=2 \
+    --policy.height_input=true
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_obs2_vs_height.md \
+    --runs="height=docs/results/validation_practical_b8_height;height_obs2=docs/results/validation_practical_b8_height_obs2"
+  lerobot_bboxpick trace --policy $X/train_practical_b8_height_obs2/checkpoints/last/pretrained_model \
+    --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out docs/results/trace_practical_b8_height_obs2_pile_id.md
+fi
 # Its second training seed (the same demos; only lerobot-train's --seed differs), test rows only.
 if want practical_b8_height_seed1; then
   train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1
