@@ -239,5 +239,8 @@ def test_one_dagger_correction_by_the_expert_is_recorded(checkpoint, tmp_path):
     ds = LeRobotDataset("local/rollout_dagger", root=root)
     assert ds.num_episodes == 1 and ds.num_frames >= 30  # 6 s at up to 20 fps (slower when loaded)
     assert all(bool(ds[i]["intervention"]) for i in range(ds.num_frames))
-    z = np.array([float(ds[i]["action"][2]) for i in range(ds.num_frames)])
-    assert z[0] - z.min() > 0.03  # the expert's correction descends toward the target
+    # The expert re-plans from wherever the policy left the arm: down onto the target from above, or first
+    # up to above it when the policy left the arm low (CI saw that once), so the sign of the motion depends
+    # on the policy; its size does not: the correction moves the arm by centimetres.
+    xyz = np.array([ds[i]["action"][:3].numpy() for i in range(ds.num_frames)])
+    assert np.linalg.norm(xyz - xyz[0], axis=1).max() > 0.03
