@@ -33,6 +33,10 @@ tracked_suite() {  # tracked_suite <run dir> <docs name>: the run's last checkpo
     --bbox_source=tracked --episodes=30 --videos=1 --out_dir=$1/suite_tracked
   publish $1/suite_tracked $2
 }
+grid60_data() {  # the quick profile's 60 grid demos (grid_id and identical_4, training seeds 0-59) in $X/grid60
+  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
+    --workers=2 --resume=true
+}
 
 # The CPU recipe: collect 200 demos, train 5000 steps, suite on test seeds with the oracle box.
 if want recipe_oracle; then
@@ -68,8 +72,7 @@ fi
 # 60 grid demos, the checkpoints after 20,000 and 40,000 samples.
 if want validation_fast_encoder; then
   X=outputs/exp
-  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
-    --workers=2 --resume=true
+  grid60_data
   [ -f $X/train_e1/checkpoints/001250/pretrained_model/config.json ] || lerobot-train \
     --policy.type=bbox_diffusion --policy.device=cpu --policy.use_amp=true --policy.image_size=64 \
     --policy.n_obs_steps=1 --policy.scheduler_warmup_steps=100 --dataset.repo_id=local/grid60 \
@@ -87,8 +90,7 @@ fi
 # steps at lr 1e-3 (about the slowest machine's 9-minute budget of batch-8 steps), batch 8 with training seed 1.
 if want validation_quick_batch; then
   X=outputs/exp
-  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
-    --workers=2 --resume=true
+  grid60_data
   for run in "b16 1900 16 3e-4" "b8 2900 8 3e-4" "b8lr1e3_2000 2000 8 1e-3" "b8_seed1 2900 8 3e-4 1"; do
     set -- $run
     [ -f $X/train_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
@@ -107,8 +109,7 @@ fi
 # is the 2900-step one's, so a quick look only) on the same scenes. Rule in results.md.
 if want validation_quick_height; then
   X=outputs/exp
-  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
-    --workers=2 --resume=true
+  grid60_data
   for run in "b8_height 1000" "b8_height_seed1 1"; do
     set -- $run
     [ -f $X/train_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
@@ -160,8 +161,7 @@ fi
 # grid_id 5000-5019; and lr 1e-3's 800-step checkpoint (a machine half as fast again).
 if want validation_quick_slow; then
   X=outputs/exp
-  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
-    --workers=2 --resume=true
+  grid60_data
   for run in "lr3e4_1600 3e-4 1000" "lr1e3_1600 1e-3 1000" "lr1e3_1600_seed1 1e-3 1"; do
     set -- $run
     [ -f $X/train_q_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
@@ -182,8 +182,7 @@ fi
 # there) for the steps 9 minutes buy with it (~2000), two training seeds, grid_id validation seeds 5000-5019.
 if want validation_quick_half_unet; then
   X=outputs/exp
-  bboxpick-collect --repo_id=local/grid60 --root=$X/grid60 --settings=grid_id,identical_4 --episodes=60 \
-    --workers=2 --resume=true
+  grid60_data
   for run in "half_2000 1000" "half_2000_seed1 1"; do
     set -- $run
     [ -f $X/train_q_$1/checkpoints/last/pretrained_model/config.json ] || lerobot-train \
