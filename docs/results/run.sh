@@ -465,6 +465,16 @@ if want practical_b8_height_obs2; then
     --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
     --out docs/results/trace_practical_b8_height_obs2_pile_id.md
 fi
+# Re-planning more often: the height run's float32 checkpoint executing 8 or 4 of each 16-step chunk
+# instead of 12 (no training), on the 180 validation scenes, compared scene by scene with its 12-step row.
+if want practical_b8_height_exec; then
+  for k in 8 4; do
+    validation_suite exec$k $X/train_practical_b8_height/checkpoints/last/pretrained_model \
+      practical_b8_height_exec$k --num_inference_steps=4 --n_action_steps=$k
+  done
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_exec.md \
+    --runs="exec12=docs/results/validation_practical_b8_height;exec8=docs/results/validation_practical_b8_height_exec8;exec4=docs/results/validation_practical_b8_height_exec4"
+fi
 # Its second training seed (the same demos; only lerobot-train's --seed differs), test rows only.
 if want practical_b8_height_seed1; then
   train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1
