@@ -475,6 +475,17 @@ if want practical_b8_height_exec; then
   bboxpick-compare --out=docs/results/validation_practical_b8_height_exec.md \
     --runs="exec12=docs/results/validation_practical_b8_height;exec8=docs/results/validation_practical_b8_height_exec8;exec4=docs/results/validation_practical_b8_height_exec4"
 fi
+# Twice the demos and twice the steps: 360 demos (the first 180 are practical180's shards, reused: the
+# collection is deterministic in its seeds), 24,000 steps of batch 8, the height input; validation rows.
+PRACTICAL360="local/lego_pick_practical360 $X/practical360"
+if want practical_b8_height_x2; then
+  [ -d $X/practical360.collect ] || cp -r $X/practical180.collect $X/practical360.collect
+  DEMO_EPISODES=360 practical_data $PRACTICAL360 0.3
+  B8_STEPS=24000 train_b8 practical_b8_height_x2 $PRACTICAL360 $FAST_INPUT --policy.height_input=true
+  suite_b8 val practical_b8_height_x2
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_x2_vs_height.md \
+    --runs="height=docs/results/validation_practical_b8_height;height_x2=docs/results/validation_practical_b8_height_x2"
+fi
 # Its second training seed (the same demos; only lerobot-train's --seed differs), test rows only.
 if want practical_b8_height_seed1; then
   train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1
