@@ -227,3 +227,25 @@ def test_cpu_preset_encoder_keypoints_are_non_disruptive_and_follow_the_mask() -
     assert (keypoints[1] - keypoints[0]).dot(centres[1] - centres[0]) > 0  # they move the way the box does
     with pytest.raises(ValueError, match="pooling"):
         MaskedImageEncoder("resnet18", pretrained=False, image_size=96, use_mask=True, pooling="max")
+
+
+def test_log_mask_size_keeps_a_small_box_distance_apart() -> None:
+    """A stacked pile brick at the close is 8% larger in the wrist image than one on the table (its top is
+    19 mm nearer a camera ~220 mm away). After the 64 px eval crop the log size keeps that as ln(1.085),
+    the sqrt size squeezes it below 0.015, and an unknown scale names the allowed ones."""
+    centre, side = 0.5, 0.060  # the brick's box at the close: sqrt(area) 6% of the image side
+    boxes = torch.tensor(
+        [[centre - s / 2, centre - s / 2, centre + s / 2, centre + s / 2] for s in (side, side * 1.085)]
+    )
+    _, mask = PairedAugment().eval()(torch.zeros(2, 3, 224, 224), bbox_to_mask(boxes, 224, 224), out_size=64)
+    log_size = mask_moments(mask, "log")[:, 2]
+    sqrt_size = mask_moments(mask, "sqrt")[:, 2]
+    assert (log_size[1] - log_size[0]).item() == pytest.approx(0.0816, abs=0.002)
+    assert 0 < (sqrt_size[1] - sqrt_size[0]).item() < 0.015
+    # ln(0.060 / 0.95) + 3: the crop keeps 95% of the side, so the box fills 6.3% of it
+    assert log_size[0].item() == pytest.approx(0.238, abs=0.005)
+    assert torch.equal(
+        mask_moments(torch.zeros(1, 1, 64, 64), "log")[0], torch.tensor([0.0, 0.0, -1.0, -1.0])
+    )
+    with pytest.raises(ValueError, match=r"size_scale='area' is not one of sqrt, log"):
+        mask_moments(mask, "area")

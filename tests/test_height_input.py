@@ -43,3 +43,20 @@ def test_height_reaches_the_condition_only_with_height_input():
 def test_a_non_positive_height_scale_names_the_field():
     with pytest.raises(ValueError, match=r"height_input_scale=0\.0 must be > 0"):
         BboxDiffusionConfig(height_input=True, height_input_scale=0.0)
+
+
+def test_mask_size_scale_reaches_the_condition_and_checks_its_value():
+    """``mask_size_scale`` changes only the size entry of the condition (the box's other numbers and the
+    picture's features stay); checkpoints saved before it existed load with "sqrt"; a wrong value names
+    the field and the allowed values."""
+    sqrt_cond = _condition(_model(height_input=True), 0.1)
+    log_cond = _condition(_model(height_input=True, mask_size_scale="log"), 0.1)
+    changed = torch.nonzero((sqrt_cond - log_cond).abs()[0] > 1e-6).flatten().tolist()
+    assert len(changed) == 1  # the size of the same mask: ln(side) + 3 against 2 * side - 1
+    side = (sqrt_cond[0, changed[0]].item() + 1) / 2
+    assert side == pytest.approx(0.2 / 0.95, rel=0.02)  # the 0.2 box after the 95% centre crop
+    assert log_cond[0, changed[0]].item() == pytest.approx(np.log(side) + 3, abs=1e-5)
+    shipped = BboxDiffusionConfig.from_pretrained("examples/bbox_diffusion_lego_pick_height")
+    assert shipped.mask_size_scale == "sqrt"
+    with pytest.raises(ValueError, match=r"mask_size_scale='area' is not one of sqrt, log"):
+        BboxDiffusionConfig(mask_size_scale="area")

@@ -26,7 +26,10 @@ from torch import Tensor
 
 from lerobot_bboxpick.geometry import relative_pose10_torch
 from lerobot_bboxpick.keys import STATE
-from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
+    INPUT_OUTPUT_FIELDS,
+    BboxDiffusionConfig,
+)
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionModel
 from lerobot_bboxpick.rl.modeling_iql_critic import IqlCriticModel, load_policy
 
@@ -81,8 +84,7 @@ class AdvantageWeightedLoss:
         if config.anchor_policy_path is not None:
             policy = load_policy(require_checkpoint_dir(config.anchor_policy_path, "anchor_policy_path"))
             reference = policy.ema_model if policy.ema_model is not None else policy.model
-            fields = ("horizon", "n_obs_steps", "image_size", "bbox_mode", "mask_centroid", "crop_ratio")
-            check_config_matches(reference.config, config, "anchor_policy_path", fields)
+            check_config_matches(reference.config, config, "anchor_policy_path", INPUT_OUTPUT_FIELDS)
         return cls(
             critic,
             reference,

@@ -20,6 +20,18 @@ from lerobot_bboxpick.keys import BBOX, STATE
 BBOX_MODES = ("mask", "lowdim", "none")
 TIMESTEP_SPACINGS = ("leading", "trailing", "linspace")  # diffusers DDIMScheduler's options
 SAMPLERS = ("ddim", "dpmsolver++")  # diffusers' DDIMScheduler and DPMSolverMultistepScheduler
+MASK_SIZE_SCALES = ("sqrt", "log")  # how the mask centroid's size is scaled (encoder.mask_moments)
+# The options that decide what a model's input and output are: a reference model (an anchor, a teacher)
+# must share them with the model it stands beside for its predictions to be comparable.
+INPUT_OUTPUT_FIELDS = (
+    "horizon",
+    "n_obs_steps",
+    "image_size",
+    "bbox_mode",
+    "mask_centroid",
+    "mask_size_scale",
+    "crop_ratio",
+)
 POSE_DIM = 10  # TCP pose10: position, rot6d, gripper width
 PACKED_STATE_DIM = POSE_DIM + 4  # the ur5 robot's observation.state: pose10 then the bbox
 
@@ -58,6 +70,12 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # target's image position directly instead of making it find the mask through the CNN.
     # Only used with bbox_mode="mask": the ablation modes have no mask, so it is turned off for them.
     mask_centroid: bool = True
+    # The scale of that size (MASK_SIZE_SCALES): "sqrt" (2 * sqrt(area fraction) - 1, what every
+    # checkpoint before 2026-12-07 used) or "log" (ln sqrt(area fraction) + 3, clamped to +-3). A small
+    # target's size is the one place its distance is measured to the millimetre (a stacked pile brick
+    # at the close is 8% larger than one on the table, less than a pixel at 64 px); "sqrt" squeezes
+    # that into 0.01, "log" keeps it at 0.08.
+    mask_size_scale: str = "sqrt"
     # Also condition on the gripper's height above the table: the observed TCP z (observation.state[2])
     # minus ``table_height`` (the table top's z in the state's frame: the robot base on a UR5, the world
     # in lego_pick, whose table top is at 0), divided by ``height_input_scale``, per observed frame.
@@ -215,6 +233,10 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(f"bbox_mode={self.bbox_mode!r} is not one of {', '.join(BBOX_MODES)}")
         if self.bbox_mode != "mask":
             self.mask_centroid = False  # no mask to measure (see the field)
+        if self.mask_size_scale not in MASK_SIZE_SCALES:
+            raise ValueError(
+                f"mask_size_scale={self.mask_size_scale!r} is not one of {', '.join(MASK_SIZE_SCALES)}"
+            )
         if not self.height_input_scale > 0.0:
             raise ValueError(f"height_input_scale={self.height_input_scale!r} must be > 0 (metres)")
         if self.pooling not in ("default", "spatial_softmax"):

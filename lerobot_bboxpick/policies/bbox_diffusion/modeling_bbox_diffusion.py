@@ -210,7 +210,7 @@ class BboxDiffusionModel(nn.Module):
             # One crop window per sample, shared by its observed frames.
             rgb, mask = self.augment(images.float(), mask, out_size=self.config.image_size)
             if self.config.mask_centroid:  # measured after the crop: consistent with the pixels
-                lowdim.append(mask_moments(mask))
+                lowdim.append(mask_moments(mask, self.config.mask_size_scale))
         features = self.encode_images(rgb, mask).view(b, t, -1).float()
         if self.target_view is not None:  # the raw frames: the window is cut before any crop or resize
             features = torch.cat([features, self.target_view(images, bboxes).view(b, t, -1).float()], dim=-1)

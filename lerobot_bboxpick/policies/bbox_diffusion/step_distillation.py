@@ -22,18 +22,15 @@ import torch.nn.functional as F
 from lerobot.utils.constants import ACTION
 from torch import Tensor
 
-from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import BboxDiffusionConfig
+from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
+    INPUT_OUTPUT_FIELDS,
+    BboxDiffusionConfig,
+)
 from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import BboxDiffusionModel
 
 FINAL = -1  # "after the last timestep": DDIM's final alpha (1 here: set_alpha_to_one)
 # What the teacher must share with the student for its two steps to be a target for one of the student's.
-MATCHING_FIELDS = (
-    "horizon",
-    "n_obs_steps",
-    "image_size",
-    "bbox_mode",
-    "mask_centroid",
-    "crop_ratio",
+MATCHING_FIELDS = INPUT_OUTPUT_FIELDS + (
     "num_train_timesteps",
     "beta_schedule",
     "prediction_type",
