@@ -1,6 +1,7 @@
 """Vision side of bbox_diffusion: bbox masks, the non-disruptive 4th channel, paired augmentation."""
 
 import copy
+import math
 
 import huggingface_hub.constants
 import pytest
@@ -247,5 +248,31 @@ def test_log_mask_size_keeps_a_small_box_distance_apart() -> None:
     assert torch.equal(
         mask_moments(torch.zeros(1, 1, 64, 64), "log")[0], torch.tensor([0.0, 0.0, -1.0, -1.0])
     )
-    with pytest.raises(ValueError, match=r"size_scale='area' is not one of sqrt, log"):
+    with pytest.raises(ValueError, match=r"size_scale='area' is not one of sqrt, log, log_wh"):
         mask_moments(mask, "area")
+
+
+def test_log_width_and_height_tell_a_turned_box_from_a_nearer_one() -> None:
+    """A nearer brick's box grows on both sides alike, a turned brick's box grows wider than tall: with
+    "log_wh" both sides are measured apart after the 64 px eval crop (within 7% of the drawn side at
+    6% of the image), so the 8.5% nearer box moves both by about ln(1.085) and a 2:1 box of the same area
+    moves them apart by about ln(2); an empty mask says "not in view"."""
+
+    def box(width: float, height: float) -> list[float]:
+        return [0.5 - width / 2, 0.5 - height / 2, 0.5 + width / 2, 0.5 + height / 2]
+
+    side = 0.060
+    boxes = torch.tensor(
+        [box(side, side), box(side * 1.085, side * 1.085), box(side * 2**0.5, side / 2**0.5)]
+    )
+    _, mask = PairedAugment().eval()(torch.zeros(3, 3, 224, 224), bbox_to_mask(boxes, 224, 224), out_size=64)
+    moments = mask_moments(mask, "log_wh")
+    assert moments.shape == (3, 5)
+    sides = (moments[:, 2:4] - 3).exp() * 0.95  # back to fractions of the uncropped image's side
+    assert sides[0].tolist() == pytest.approx([side, side], rel=0.07)
+    nearer = (moments[1, 2:4] - moments[0, 2:4]).tolist()
+    assert nearer == pytest.approx([0.0816, 0.0816], abs=0.02)
+    assert (moments[2, 2] - moments[2, 3]).item() == pytest.approx(math.log(2), abs=0.15)
+    assert moments[:, 4].tolist() == [1.0, 1.0, 1.0]
+    hidden = mask_moments(torch.zeros(1, 1, 64, 64), "log_wh")[0]
+    assert hidden.tolist() == [0.0, 0.0, -1.0, -1.0, -1.0]

@@ -58,5 +58,18 @@ def test_mask_size_scale_reaches_the_condition_and_checks_its_value():
     assert log_cond[0, changed[0]].item() == pytest.approx(np.log(side) + 3, abs=1e-5)
     shipped = BboxDiffusionConfig.from_pretrained("examples/bbox_diffusion_lego_pick_height")
     assert shipped.mask_size_scale == "sqrt"
-    with pytest.raises(ValueError, match=r"mask_size_scale='area' is not one of sqrt, log"):
+    with pytest.raises(ValueError, match=r"mask_size_scale='area' is not one of sqrt, log, log_wh"):
         BboxDiffusionConfig(mask_size_scale="area")
+
+
+def test_log_width_and_height_add_one_entry_to_the_condition():
+    """With "log_wh" the box's one size becomes two (its width and height on the log scale): the
+    condition is one entry wider, and for the square 0.2 box both equal the "log" size."""
+    log_cond = _condition(_model(height_input=True, mask_size_scale="log"), 0.1)
+    wh_cond = _condition(_model(height_input=True, mask_size_scale="log_wh"), 0.1)
+    assert wh_cond.shape[1] == log_cond.shape[1] + 1
+    # the box's numbers end the condition: cx, cy, the size(s), visible (after the pose and the height)
+    log_size = log_cond[0, -2].item()
+    assert wh_cond[0, -3:-1].tolist() == pytest.approx([log_size, log_size], abs=0.03)
+    assert wh_cond[0, -5:-3].tolist() == pytest.approx(log_cond[0, -4:-2].tolist(), abs=1e-6)  # the centre
+    assert wh_cond[0, -1].item() == log_cond[0, -1].item() == 1.0  # visible

@@ -486,17 +486,22 @@ if want practical_b8_height_x2; then
   bboxpick-compare --out=docs/results/validation_practical_b8_height_x2_vs_height.md \
     --runs="height=docs/results/validation_practical_b8_height;height_x2=docs/results/validation_practical_b8_height_x2"
 fi
-# The box's size on a log scale (the pile's distance cue), the 180-demo height recipe otherwise unchanged.
-if want practical_b8_height_logsize; then
-  train_b8 practical_b8_height_logsize $PRACTICAL $FAST_INPUT --policy.height_input=true \
-    --policy.mask_size_scale=log
-  suite_b8 val practical_b8_height_logsize
-  bboxpick-compare --out=docs/results/validation_practical_b8_height_logsize_vs_height.md \
-    --runs="height=docs/results/validation_practical_b8_height;logsize=docs/results/validation_practical_b8_height_logsize"
-  lerobot_bboxpick trace --policy $X/train_practical_b8_height_logsize/checkpoints/last/pretrained_model \
+# The 180-demo height recipe with another scale for the mask centroid's size (the pile's distance cue):
+# train, the validation suite, the comparison with the sqrt run and the pile trace. $1: run name, $2: scale.
+size_scale_run() {
+  train_b8 "$1" $PRACTICAL $FAST_INPUT --policy.height_input=true --policy.mask_size_scale="$2"
+  suite_b8 val "$1"
+  bboxpick-compare --out="docs/results/validation_$1_vs_height.md" \
+    --runs="height=docs/results/validation_practical_b8_height;${1#practical_b8_height_}=docs/results/validation_$1"
+  lerobot_bboxpick trace --policy "$X/train_$1/checkpoints/last/pretrained_model" \
     --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
-    --out docs/results/trace_practical_b8_height_logsize_pile_id.md
-fi
+    --out "docs/results/trace_$1_pile_id.md"
+}
+# The box's size on a log scale.
+if want practical_b8_height_logsize; then size_scale_run practical_b8_height_logsize log; fi
+# The box's width and height on a log scale, apart (a turned brick's box is wider, a nearer one's larger
+# on both sides).
+if want practical_b8_height_logwh; then size_scale_run practical_b8_height_logwh log_wh; fi
 # Its second training seed (the same demos; only lerobot-train's --seed differs), test rows only.
 if want practical_b8_height_seed1; then
   train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1

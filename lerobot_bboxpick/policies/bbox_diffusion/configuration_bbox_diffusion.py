@@ -20,7 +20,7 @@ from lerobot_bboxpick.keys import BBOX, STATE
 BBOX_MODES = ("mask", "lowdim", "none")
 TIMESTEP_SPACINGS = ("leading", "trailing", "linspace")  # diffusers DDIMScheduler's options
 SAMPLERS = ("ddim", "dpmsolver++")  # diffusers' DDIMScheduler and DPMSolverMultistepScheduler
-MASK_SIZE_SCALES = ("sqrt", "log")  # how the mask centroid's size is scaled (encoder.mask_moments)
+MASK_SIZE_SCALES = ("sqrt", "log", "log_wh")  # how the mask centroid's size is scaled (encoder.mask_moments)
 # The options that decide what a model's input and output are: a reference model (an anchor, a teacher)
 # must share them with the model it stands beside for its predictions to be comparable.
 INPUT_OUTPUT_FIELDS = (
@@ -77,6 +77,8 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # that into 0.01, "log" keeps it at 0.08. Measured (docs/results.md): with "log" the height recipe
     # closes at the right height on aligned stacked bricks and never closes on turned ones (a turned
     # brick's box is larger at the same distance): 39% of the validation scenes against 88%.
+    # "log_wh" gives the box's width and height apart on that log scale (5 centroid numbers, not 4): a
+    # nearer brick's box grows on both sides, a turned one's mostly on one.
     mask_size_scale: str = "sqrt"
     # Also condition on the gripper's height above the table: the observed TCP z (observation.state[2])
     # minus ``table_height`` (the table top's z in the state's frame: the robot base on a UR5, the world

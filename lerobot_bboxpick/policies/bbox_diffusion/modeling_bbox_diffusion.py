@@ -40,6 +40,7 @@ from lerobot_bboxpick.policies.bbox_diffusion.encoder import (
     PairedAugment,
     bbox_to_mask,
     mask_moments,
+    mask_moments_dim,
 )
 from lerobot_bboxpick.policies.bbox_diffusion.onnx_runtime import OnnxModule
 from lerobot_bboxpick.policies.bbox_diffusion.target_crop import TargetView
@@ -99,10 +100,12 @@ def _set_rng_states(states: list[Tensor], devices: list[torch.device]) -> None:
 
 def global_condition_dim(config: BboxDiffusionConfig, image_feature_dim: int) -> int:
     """Width of the UNet's global condition: per observed step, the image feature, the scaled pose10,
-    (with ``lowdim`` bbox mode or the mask centroid) the 4 box numbers and (``height_input``) the height."""
-    lowdim = (
-        10 + (4 if config.bbox_mode == "lowdim" or config.mask_centroid else 0) + int(config.height_input)
-    )
+    (with ``lowdim`` bbox mode: the 4 box numbers; with the mask centroid: its 4 or 5) and
+    (``height_input``) the height."""
+    box = 4 if config.bbox_mode == "lowdim" else 0
+    if config.mask_centroid:
+        box = mask_moments_dim(config.mask_size_scale)
+    lowdim = 10 + box + int(config.height_input)
     return config.n_obs_steps * (image_feature_dim + lowdim)
 
 
