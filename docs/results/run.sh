@@ -279,6 +279,11 @@ variant_b8() {  # variant_b8 <name> <repo_id> <root> <recovery> [policy options]
   suite_b8 val $name
   compare_b8 val $name
 }
+pile_trace() {  # pile_trace <name>: where its gripper closes on pile_id validation scenes 5000-5009
+  lerobot_bboxpick trace --policy "$X/train_$1/checkpoints/last/pretrained_model" \
+    --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
+    --out "docs/results/trace_$1_pile_id.md"
+}
 turned_targets() {  # turned_targets <name>: its validation rows by the target's turn beside practical_b8's,
   # and where it closes the gripper on random_id validation scenes 5000-5009 (lerobot_bboxpick trace)
   bboxpick-compare --by=target_yaw --out=docs/results/validation_$1_yaw.md \
@@ -445,25 +450,28 @@ if want practical_b8_height_pile; then
     variant_b8 practical_b8_height_pile $PRACTICAL_PILE 0.3 $FAST_INPUT --policy.height_input=true
   bboxpick-compare --out=docs/results/validation_practical_b8_height_pile_vs_height.md \
     --runs="height=docs/results/validation_practical_b8_height;height_pile=docs/results/validation_practical_b8_height_pile"
-  lerobot_bboxpick trace --policy $X/train_practical_b8_height_pile/checkpoints/last/pretrained_model \
-    --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
-    --out docs/results/trace_practical_b8_height_pile_pile_id.md
+  pile_trace practical_b8_height_pile
 fi
 if want practical_b8_height_pile_test; then
   variant_b8_test practical_b8_height_pile
   bboxpick-compare --out=docs/results/practical_b8_height_pile_vs_height.md \
     --runs="height=docs/results/practical_b8_height;height_pile=docs/results/practical_b8_height_pile"
 fi
-# The height recipe with two observed frames (the parallax between them measures how far the brick is),
-# on the 180 demos. Rule in results.md.
+# The height recipe with two observed frames: variant_b8's rows, the comparison with a baseline run and the
+# pile trace. two_frame_run <name> <repo_id> <root> <recovery> <baseline run name>
+two_frame_run() {
+  variant_b8 $1 $2 $3 $4 --policy.image_size=64 --policy.n_obs_steps=2 --policy.height_input=true
+  bboxpick-compare --out="docs/results/validation_$1_vs_${5#practical_b8_}.md" \
+    --runs="${5#practical_b8_}=docs/results/validation_$5;${1#practical_b8_}=docs/results/validation_$1"
+  pile_trace $1
+}
+# On the 180 demos (the parallax between the frames measures how far the brick is). Rule in results.md.
 if want practical_b8_height_obs2; then
-  variant_b8 practical_b8_height_obs2 $PRACTICAL 0.3 --policy.image_size=64 --policy.n_obs_steps=2 \
-    --policy.height_input=true
-  bboxpick-compare --out=docs/results/validation_practical_b8_height_obs2_vs_height.md \
-    --runs="height=docs/results/validation_practical_b8_height;height_obs2=docs/results/validation_practical_b8_height_obs2"
-  lerobot_bboxpick trace --policy $X/train_practical_b8_height_obs2/checkpoints/last/pretrained_model \
-    --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
-    --out docs/results/trace_practical_b8_height_obs2_pile_id.md
+  two_frame_run practical_b8_height_obs2 $PRACTICAL 0.3 practical_b8_height
+fi
+# Without the recovery demos (the copycat reading of the two-frame run): a diagnostic. Rule in results.md.
+if want practical_b8_height_obs2_norec; then
+  two_frame_run practical_b8_height_obs2_norec $NO_RECOVERY 0 practical_b8_height_obs2
 fi
 # Re-planning more often: the height run's float32 checkpoint executing 8 or 4 of each 16-step chunk
 # instead of 12 (no training), on the 180 validation scenes, compared scene by scene with its 12-step row.
@@ -493,9 +501,7 @@ size_scale_run() {
   suite_b8 val "$1"
   bboxpick-compare --out="docs/results/validation_$1_vs_height.md" \
     --runs="height=docs/results/validation_practical_b8_height;${1#practical_b8_height_}=docs/results/validation_$1"
-  lerobot_bboxpick trace --policy "$X/train_$1/checkpoints/last/pretrained_model" \
-    --setting pile_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
-    --out "docs/results/trace_$1_pile_id.md"
+  pile_trace $1
 }
 # The box's size on a log scale.
 if want practical_b8_height_logsize; then size_scale_run practical_b8_height_logsize log; fi
