@@ -473,6 +473,13 @@ fi
 if want practical_b8_height_obs2_norec; then
   two_frame_run practical_b8_height_obs2_norec $NO_RECOVERY 0 practical_b8_height_obs2
 fi
+# The one-frame height recipe without the recovery demos: the two-frame diagnostic's comparator.
+if want practical_b8_height_norec; then
+  variant_b8 practical_b8_height_norec $NO_RECOVERY 0 $FAST_INPUT --policy.height_input=true
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_vs_obs2_norec.md \
+    --runs="height_obs2_norec=docs/results/validation_practical_b8_height_obs2_norec;height_norec=docs/results/validation_practical_b8_height_norec"
+  pile_trace practical_b8_height_norec
+fi
 # Re-planning more often: the height run's float32 checkpoint executing 8 or 4 of each 16-step chunk
 # instead of 12 (no training), on the 180 validation scenes, compared scene by scene with its 12-step row.
 if want practical_b8_height_exec; then
