@@ -478,6 +478,8 @@ if want practical_b8_height_norec; then
   variant_b8 practical_b8_height_norec $NO_RECOVERY 0 $FAST_INPUT --policy.height_input=true
   bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_vs_obs2_norec.md \
     --runs="height_obs2_norec=docs/results/validation_practical_b8_height_obs2_norec;height_norec=docs/results/validation_practical_b8_height_norec"
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_vs_height.md \
+    --runs="height=docs/results/validation_practical_b8_height;height_norec=docs/results/validation_practical_b8_height_norec"
   pile_trace practical_b8_height_norec
 fi
 # Re-planning more often: the height run's float32 checkpoint executing 8 or 4 of each 16-step chunk
