@@ -32,6 +32,7 @@ from torch import Tensor, nn
 from lerobot_bboxpick.geometry import absolute_pose10_torch, mat_to_pose9, relative_pose10_torch
 from lerobot_bboxpick.latency import fresh_steps, observation_time
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
+    POSE_DIM,
     BboxDiffusionConfig,
     BboxDiffusionPaperConfig,
 )
@@ -105,7 +106,7 @@ def global_condition_dim(config: BboxDiffusionConfig, image_feature_dim: int) ->
     box = 4 if config.bbox_mode == "lowdim" else 0
     if config.mask_centroid:
         box = mask_moments_dim(config.mask_size_scale)
-    lowdim = 10 + box + int(config.height_input)
+    lowdim = POSE_DIM + box + int(config.height_input)
     return config.n_obs_steps * (image_feature_dim + lowdim)
 
 
