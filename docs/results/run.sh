@@ -482,6 +482,25 @@ if want practical_b8_height_norec; then
     --runs="height=docs/results/validation_practical_b8_height;height_norec=docs/results/validation_practical_b8_height_norec"
   pile_trace practical_b8_height_norec
 fi
+# Its test rows, oracle and the tracker's box, beside the recipe with recoveries (float32, 4 DDIM steps).
+if want practical_b8_height_norec_test; then
+  variant_b8_test practical_b8_height_norec
+  bboxpick-suite --policies=practical_b8_height_norec=$X/train_practical_b8_height_norec/checkpoints/last/pretrained_model \
+    --bbox_source=tracked --episodes=30 --seed_start=10000 --videos=0 --num_inference_steps=4 --workers=2 \
+    --out_dir=$X/test_practical_b8_height_norec_tracked
+  publish $X/test_practical_b8_height_norec_tracked practical_b8_height_norec_tracked
+  bboxpick-compare --out=docs/results/practical_b8_height_norec_vs_height.md --runs="height=docs/results/practical_b8_height;\
+height_norec=docs/results/practical_b8_height_norec;height_norec, tracked box=docs/results/practical_b8_height_norec_tracked"
+fi
+# Its second training seed (the same demos; only lerobot-train's --seed differs): validation rows (the
+# adoption rule in results.md reads these) and test rows.
+if want practical_b8_height_norec_seed1; then
+  train_b8 practical_b8_height_norec_seed1 $NO_RECOVERY $FAST_INPUT --policy.height_input=true --seed=1
+  suite_b8 val practical_b8_height_norec_seed1
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_seeds.md \
+    --runs="seed1000=docs/results/validation_practical_b8_height_norec;seed1=docs/results/validation_practical_b8_height_norec_seed1"
+  variant_b8_test practical_b8_height_norec_seed1
+fi
 # Re-planning more often: the height run's float32 checkpoint executing 8 or 4 of each 16-step chunk
 # instead of 12 (no training), on the 180 validation scenes, compared scene by scene with its 12-step row.
 if want practical_b8_height_exec; then
