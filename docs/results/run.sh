@@ -296,6 +296,11 @@ variant_b8_test() {  # variant_b8_test <name>: its test rows, likewise
   suite_b8 test $1
   compare_b8 test $1
 }
+tracked_b8() {  # tracked_b8 <name>: its test rows with the tracker's box (4 DDIM steps), docs/results/<name>_tracked
+  bboxpick-suite --policies=$1=$X/train_$1/checkpoints/last/pretrained_model --bbox_source=tracked --episodes=30 \
+    --seed_start=10000 --videos=0 --num_inference_steps=4 --workers=2 --out_dir=$X/test_$1_tracked
+  publish $X/test_$1_tracked $1_tracked
+}
 FAST_INPUT="--policy.image_size=64 --policy.n_obs_steps=1"
 PRACTICAL="local/lego_pick_practical $X/practical180"  # repo_id and root, word-split on use
 NO_RECOVERY="local/lego_pick_practical_norec $X/practical180_norec"
@@ -485,10 +490,7 @@ fi
 # Its test rows, oracle and the tracker's box, beside the recipe with recoveries (float32, 4 DDIM steps).
 if want practical_b8_height_norec_test; then
   variant_b8_test practical_b8_height_norec
-  bboxpick-suite --policies=practical_b8_height_norec=$X/train_practical_b8_height_norec/checkpoints/last/pretrained_model \
-    --bbox_source=tracked --episodes=30 --seed_start=10000 --videos=0 --num_inference_steps=4 --workers=2 \
-    --out_dir=$X/test_practical_b8_height_norec_tracked
-  publish $X/test_practical_b8_height_norec_tracked practical_b8_height_norec_tracked
+  tracked_b8 practical_b8_height_norec
   bboxpick-compare --out=docs/results/practical_b8_height_norec_vs_height.md --runs="height=docs/results/practical_b8_height;\
 height_norec=docs/results/practical_b8_height_norec;height_norec, tracked box=docs/results/practical_b8_height_norec_tracked"
 fi
@@ -540,6 +542,21 @@ if want practical_b8_height_logwh; then size_scale_run practical_b8_height_logwh
 if want practical_b8_height_seed1; then
   train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1
   variant_b8_test practical_b8_height_seed1
+fi
+# The same second seed on the 180 validation scenes (the adoption rule's follow-up in results.md).
+if want practical_b8_height_seed1_val; then
+  suite_b8 val practical_b8_height_seed1
+  bboxpick-compare --out=docs/results/validation_recovery_seeds.md \
+    --runs="recoveries seed1000=docs/results/validation_practical_b8_height;recoveries seed1=docs/results/validation_practical_b8_height_seed1;\
+no recoveries seed1000=docs/results/validation_practical_b8_height_norec;no recoveries seed1=docs/results/validation_practical_b8_height_norec_seed1"
+fi
+# The same second seed with the tracker's box (issue 14: both seeds' rows with either box), beside its oracle
+# rows and the shipped export's (seed 1000) tracked rows.
+if want practical_b8_height_seed1_tracked; then
+  tracked_b8 practical_b8_height_seed1
+  bboxpick-compare --out=docs/results/practical_b8_height_seeds_tracked.md --runs="seed1000 exported=docs/results/shipped_height_oracle;\
+seed1000 exported, tracked box=docs/results/shipped_height_tracked;seed1=docs/results/practical_b8_height_seed1;\
+seed1, tracked box=docs/results/practical_b8_height_seed1_tracked"
 fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
 # paper protocol's two-frame 96 px policy (grid demos only), the shipped checkpoint, the batch-8 variants.
