@@ -54,7 +54,7 @@ def test_fraction_one_records_recoveries_and_zero_plain_demos(env):
 
 
 def test_collect_config_recovery_reaches_the_recorder(env, tmp_path):
-    """``CollectConfig(recovery=...)`` alone (what the main job's practical profile passes) records
+    """``CollectConfig(recovery=...)`` alone (what bboxpick-collect --recovery passes) records
     recovery demos: the episode starts where the lead-in left the arm, not at the reset pose."""
     root = tmp_path / "ds"
     collect(CollectConfig(repo_id="test/recovery", root=root, episodes=1, recovery=1.0))

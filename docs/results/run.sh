@@ -432,17 +432,18 @@ if want practical_b8_height_test; then variant_b8_test practical_b8_height; fi
 # from its pre-written rule, docs/results.md) and ships: exported as
 # examples/bbox_diffusion_lego_pick_height (EMA weights, float16, the 4 DDIM steps its rows were measured at
 # written into its config), evaluated as shipped on the test scenes with the oracle box and the tracker's.
-if want shipped_height; then
-  bboxpick-export --src=$X/train_practical_b8_height/checkpoints/last/pretrained_model \
+ship() {  # ship <run name> <docs name>: its export as the shipped checkpoint, then its test rows as exported
+  bboxpick-export --src=$X/train_$1/checkpoints/last/pretrained_model \
     --dst=examples/bbox_diffusion_lego_pick_height --half=true --num_inference_steps=4
   for source in oracle tracked; do
     bboxpick-suite --policies=shipped=examples/bbox_diffusion_lego_pick_height --bbox_source=$source \
-      --episodes=30 --seed_start=10000 --videos=0 --workers=2 --out_dir=$X/test_shipped_height_$source
-    publish $X/test_shipped_height_$source shipped_height_$source
+      --episodes=30 --seed_start=10000 --videos=0 --workers=2 --out_dir=$X/test_$2_$source
+    publish $X/test_$2_$source $2_$source
   done
-  bboxpick-compare --out=docs/results/shipped_height.md --runs="float32=docs/results/practical_b8_height;\
-exported=docs/results/shipped_height_oracle;exported, tracked box=docs/results/shipped_height_tracked"
-fi
+  bboxpick-compare --out=docs/results/$2.md --runs="float32=docs/results/$1;\
+exported=docs/results/$2_oracle;exported, tracked box=docs/results/$2_tracked"
+}
+if want shipped_height; then ship practical_b8_height shipped_height; fi
 # Where the shipped checkpoint closes on pile_id validation scenes 5000-5009 (7 of them stacked targets);
 # then the height recipe with three times the pile demos (240 demos: the six layouts' cycle with pile_id
 # twice more, so 90 pile demos and 30 of each other layout; 30% recoveries), the same 96,000 samples.
@@ -542,6 +543,21 @@ if want practical_b8_height_logwh; then size_scale_run practical_b8_height_logwh
 if want practical_b8_height_seed1; then
   train_b8 practical_b8_height_seed1 $PRACTICAL $FAST_INPUT --policy.height_input=true --seed=1
   variant_b8_test practical_b8_height_seed1
+fi
+# Adopted by the follow-up rule (results.md): the recipe without recoveries, its seed with more validation
+# picks (1000) exported as the shipped checkpoint (replacing the export above), and its second seed's
+# test rows with the tracker's box.
+if want shipped_norec; then
+  ship practical_b8_height_norec shipped_norec
+  bboxpick-compare --out=docs/results/shipped_norec_vs_height.md --runs="height export=docs/results/shipped_height_oracle;\
+height export, tracked box=docs/results/shipped_height_tracked;norec export=docs/results/shipped_norec_oracle;\
+norec export, tracked box=docs/results/shipped_norec_tracked"
+fi
+if want practical_b8_height_norec_seed1_tracked; then
+  tracked_b8 practical_b8_height_norec_seed1
+  bboxpick-compare --out=docs/results/practical_b8_height_norec_seeds.md --runs="seed1000 exported=docs/results/shipped_norec_oracle;\
+seed1000 exported, tracked box=docs/results/shipped_norec_tracked;seed1=docs/results/practical_b8_height_norec_seed1;\
+seed1, tracked box=docs/results/practical_b8_height_norec_seed1_tracked"
 fi
 # The same second seed on the 180 validation scenes (the adoption rule's follow-up in results.md).
 if want practical_b8_height_seed1_val; then
