@@ -559,6 +559,14 @@ if want practical_b8_height_norec_seed1_tracked; then
 seed1000 exported, tracked box=docs/results/shipped_norec_tracked;seed1=docs/results/practical_b8_height_norec_seed1;\
 seed1, tracked box=docs/results/practical_b8_height_norec_seed1_tracked"
 fi
+# Where the adopted recipe's seed 1000 closes on turned targets (its validation rows by the target's turn, the
+# random_id trace), and a third training seed (--seed=2; validation and test rows) for the recipe's spread.
+if want practical_b8_height_norec_turned; then turned_targets practical_b8_height_norec; fi
+if want practical_b8_height_norec_seed2; then
+  train_b8 practical_b8_height_norec_seed2 $NO_RECOVERY $FAST_INPUT --policy.height_input=true --seed=2
+  suite_b8 val practical_b8_height_norec_seed2
+  variant_b8_test practical_b8_height_norec_seed2
+fi
 # The same second seed on the 180 validation scenes (the adoption rule's follow-up in results.md).
 if want practical_b8_height_seed1_val; then
   suite_b8 val practical_b8_height_seed1
