@@ -567,20 +567,13 @@ if want practical_b8_height_norec_seed2; then
   suite_b8 val practical_b8_height_norec_seed2
   variant_b8_test practical_b8_height_norec_seed2
 fi
-# The same second seed on the 180 validation scenes (the adoption rule's follow-up in results.md).
+# The recipe with recoveries, its second seed (practical_b8_height_seed1) on the 180 validation scenes (the
+# adoption rule's follow-up in results.md).
 if want practical_b8_height_seed1_val; then
   suite_b8 val practical_b8_height_seed1
   bboxpick-compare --out=docs/results/validation_recovery_seeds.md \
     --runs="recoveries seed1000=docs/results/validation_practical_b8_height;recoveries seed1=docs/results/validation_practical_b8_height_seed1;\
 no recoveries seed1000=docs/results/validation_practical_b8_height_norec;no recoveries seed1=docs/results/validation_practical_b8_height_norec_seed1"
-fi
-# The same second seed with the tracker's box (issue 14: both seeds' rows with either box), beside its oracle
-# rows and the shipped export's (seed 1000) tracked rows.
-if want practical_b8_height_seed1_tracked; then
-  tracked_b8 practical_b8_height_seed1
-  bboxpick-compare --out=docs/results/practical_b8_height_seeds_tracked.md --runs="seed1000 exported=docs/results/shipped_height_oracle;\
-seed1000 exported, tracked box=docs/results/shipped_height_tracked;seed1=docs/results/practical_b8_height_seed1;\
-seed1, tracked box=docs/results/practical_b8_height_seed1_tracked"
 fi
 # Test rows split by how far the target is turned off the grid axes (bboxpick-compare --by=target_yaw): the
 # paper protocol's two-frame 96 px policy (grid demos only), the shipped checkpoint, the batch-8 variants.
