@@ -3,6 +3,7 @@ UNet's chunks."""
 
 import sys
 
+import numpy as np
 import pytest
 import torch
 
@@ -389,3 +390,36 @@ def test_train_on_sampler_timesteps_trains_only_where_ddim_samples():
     assert few.model.sampler_timesteps().tolist() == [40, 32, 24, 16, 8, 0]
     assert _training_timesteps(few, 64) == {40, 32, 24, 16, 8, 0}  # 64 draws hit all six (p > 0.99)
     assert len(_training_timesteps(_policy(num_inference_steps=6), 64) - {40, 32, 24, 16, 8, 0}) > 20
+
+
+def test_rotation_scale_magnifies_a_turn_around_the_identity_and_round_trips():
+    from scipy.spatial.transform import Rotation
+
+    from lerobot_bboxpick.geometry import mat_to_rot6d
+    from lerobot_bboxpick.policies.bbox_diffusion.modeling_bbox_diffusion import PoseScaler
+
+    turn = torch.zeros(2, 10)
+    turn[:, 3:9] = torch.tensor(
+        np.stack(
+            [mat_to_rot6d(np.eye(3)), mat_to_rot6d(Rotation.from_euler("z", 20, degrees=True).as_matrix())]
+        )
+    )
+    turn[:, :3] = 0.03
+    turn[:, 9] = 0.02
+    unscaled, magnified = PoseScaler(0.15, 0.09), PoseScaler(0.15, 0.09, rotation_scale=0.36)
+    # 1.0 is the published behaviour: rot6d entries pass through untouched
+    assert torch.equal(unscaled(turn)[:, 3:9], turn[:, 3:9])
+    scaled = magnified(turn)
+    assert torch.allclose(scaled[0, 3:9], turn[0, 3:9])  # no turn stays the identity
+    sin20 = np.sin(np.radians(20))
+    assert abs(abs(float(scaled[1, 4])) - sin20 / 0.36) < 1e-5  # a 20-degree turn's yaw entry: 0.95
+    assert torch.allclose(scaled[:, :3], unscaled(turn)[:, :3]) and torch.allclose(
+        scaled[:, 9], unscaled(turn)[:, 9]
+    )
+    assert torch.allclose(magnified.inverse(scaled), turn, atol=1e-6)
+
+
+@pytest.mark.parametrize("value", [0.0, -0.3, 1.5])
+def test_a_rotation_scale_outside_zero_one_names_the_field(value: float):
+    with pytest.raises(ValueError, match=r"action_rotation_scale=.* must be in \(0, 1\]"):
+        BboxDiffusionConfig(action_rotation_scale=value)

@@ -125,7 +125,9 @@ class IqlCriticModel(nn.Module, HubMixin):
         self.encoder = encoder
         pc = encoder.config
         self.horizon = pc.horizon
-        self.action_scaler = PoseScaler(pc.action_position_scale, pc.max_gripper_width)
+        self.action_scaler = PoseScaler(
+            pc.action_position_scale, pc.max_gripper_width, pc.action_rotation_scale
+        )
         self.dims = IqlDims(
             state_dim=encoder.out_dim,
             action_dim=pc.horizon * ACTION_DIM,

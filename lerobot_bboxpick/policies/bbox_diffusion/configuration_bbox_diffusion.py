@@ -177,6 +177,13 @@ class BboxDiffusionConfig(PreTrainedConfig):
     # the previous observation by obs_position_scale; gripper widths map [0, max_gripper_width] to [-1, 1].
     # 0.15 m: the expert's 16-step chunks move at most 0.146 m from the current pose (99th pct 0.12 m).
     action_position_scale: float = 0.15
+    # The chunk's rotation (rot6d, relative to the current pose) enters as identity + (R - identity) /
+    # action_rotation_scale. 1.0 (every published checkpoint): unscaled, as UMI. The expert's turns are
+    # small: the yaw entries of its relative chunks span +-0.36 (99.9th pct; std 0.05 against the
+    # positions' 0.17-0.28 after scaling), so at 1.0 a turn is below the noise of the last denoising steps;
+    # 0.36 maps that range onto [-1, 1], the min-max normalisation LeRobot's diffusion policy gives
+    # every action dimension.
+    action_rotation_scale: float = 1.0
     obs_position_scale: float = 0.02
     max_gripper_width: float = 0.09
 
@@ -242,6 +249,8 @@ class BboxDiffusionConfig(PreTrainedConfig):
             raise ValueError(
                 f"mask_size_scale={self.mask_size_scale!r} is not one of {', '.join(MASK_SIZE_SCALES)}"
             )
+        if not 0.0 < self.action_rotation_scale <= 1.0:
+            raise ValueError(f"action_rotation_scale={self.action_rotation_scale!r} must be in (0, 1]")
         if not self.height_input_scale > 0.0:
             raise ValueError(f"height_input_scale={self.height_input_scale!r} must be > 0 (metres)")
         if self.pooling not in ("default", "spatial_softmax"):

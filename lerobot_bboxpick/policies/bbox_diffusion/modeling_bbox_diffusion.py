@@ -56,17 +56,22 @@ Guide = Callable[[Tensor], Tensor]
 class PoseScaler(nn.Module):
     """Fixed affine scaling of relative pose10 vectors into roughly [-1, 1] (and back).
 
-    Positions are divided by a scale in metres, rot6d entries are already in [-1, 1] (UMI leaves them
-    unnormalised too), gripper widths map [0, max_width] to [-1, 1]. Fixed rather than fitted to
+    Positions are divided by a scale in metres, gripper widths map [0, max_width] to [-1, 1]. Rot6d
+    entries are already in [-1, 1] (UMI leaves them unnormalised too); ``rotation_scale`` < 1 magnifies
+    their departure from the identity (identity + (R - identity) / rotation_scale), so small turns are not
+    lost in the sampler's noise while no turn stays exactly the identity. Fixed rather than fitted to
     dataset statistics because LeRobot hands the processors statistics of absolute poses only.
     """
 
-    def __init__(self, position_scale: float, max_width: float) -> None:
+    def __init__(self, position_scale: float, max_width: float, rotation_scale: float = 1.0) -> None:
         super().__init__()
         scale = torch.ones(10)
         scale[:3] = position_scale
+        scale[3:9] = rotation_scale
         scale[9] = max_width / 2
         offset = torch.zeros(10)
+        # (x - offset) / scale = identity + (x - identity) / scale  <=>  offset = identity * (1 - scale)
+        offset[3:9] = torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0]) * (1.0 - rotation_scale)
         offset[9] = max_width / 2
         self.register_buffer("scale", scale, persistent=False)
         self.register_buffer("offset", offset, persistent=False)
@@ -169,7 +174,9 @@ class BboxDiffusionModel(nn.Module):
         self.target_view = build_target_view(config)
         self.augment = PairedAugment(crop_ratio=config.crop_ratio, color_jitter=config.color_jitter)
         self.obs_scaler = PoseScaler(config.obs_position_scale, config.max_gripper_width)
-        self.action_scaler = PoseScaler(config.action_position_scale, config.max_gripper_width)
+        self.action_scaler = PoseScaler(
+            config.action_position_scale, config.max_gripper_width, config.action_rotation_scale
+        )
         self.unet = DiffusionConditionalUnet1d(
             config, global_cond_dim=global_condition_dim(config, image_feature_dim(self))
         )
