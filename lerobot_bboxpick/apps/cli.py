@@ -1,6 +1,7 @@
 """The ``lerobot_bboxpick`` command: ``run`` (the main job: collect -> train -> suite), ``demo`` (expert
 rollouts), ``bench``, ``sheet`` (settings picture, or the policy's inputs), ``trace`` (where a policy
-closes the gripper, relative to its target)."""
+closes the gripper, relative to its target), ``turn-fit`` (how much of the demos' turn a policy
+reproduces on their own frames)."""
 
 from __future__ import annotations
 
@@ -107,6 +108,19 @@ def main(argv: list[str] | None = None) -> int:
         "--num-inference-steps", type=_positive, default=None, help="default: the checkpoint's"
     )
     trace.add_argument("--out", type=Path, default=None, help="also write the markdown table here")
+    turn_fit = sub.add_parser(
+        "turn-fit", help="teacher forcing: how much of the demos' turn the policy's chunk reproduces"
+    )
+    turn_fit.add_argument("--policy", required=True, help="a checkpoint folder (pretrained_model)")
+    turn_fit.add_argument("--dataset", type=Path, required=True, help="a LeRobotDataset root (its demos)")
+    turn_fit.add_argument("--settings", type=_settings, default=_settings("random_id,pile_id"))
+    turn_fit.add_argument(
+        "--frames", type=_seeds, default=[0, 16, 32], help="comma-separated frame offsets into each episode"
+    )
+    turn_fit.add_argument(
+        "--num-inference-steps", type=_positive, default=None, help="default: the checkpoint's"
+    )
+    turn_fit.add_argument("--out", type=Path, default=None, help="also write the markdown table here")
     args = parser.parse_args(argv)
 
     if args.command == "run":
@@ -159,6 +173,12 @@ def main(argv: list[str] | None = None) -> int:
         from lerobot_bboxpick.eval.trace import run_trace, write_trace
 
         write_trace(run_trace(args.policy, args.setting, args.seeds, args.num_inference_steps), args.out)
+    elif args.command == "turn-fit":
+        from lerobot_bboxpick.eval.trace import write_trace
+        from lerobot_bboxpick.eval.turn_fit import run_turn_fit
+
+        table = run_turn_fit(args.policy, args.dataset, args.settings, args.frames, args.num_inference_steps)
+        write_trace(table, args.out)
     else:
         from lerobot_bboxpick.apps.demo import inputs_sheet, settings_sheet
         from lerobot_bboxpick.viz import save_png
