@@ -292,6 +292,11 @@ turned_targets() {  # turned_targets <name>: its validation rows by the target's
     --setting random_id --seeds 5000,5001,5002,5003,5004,5005,5006,5007,5008,5009 --num-inference-steps 4 \
     --out docs/results/trace_$1_random_id.md
 }
+turn_fit() {  # turn_fit <name> <data root>: teacher forcing, how much of the random_id and pile_id demos' turn
+  # its chunk reproduces from their frames 0, 16 and 32 (TURN_FRAMES: others) (lerobot_bboxpick turn-fit)
+  lerobot_bboxpick turn-fit --policy $X/train_$1/checkpoints/last/pretrained_model --dataset $2 \
+    --settings random_id,pile_id --frames ${TURN_FRAMES:-0,16,32} --num-inference-steps 4 --out docs/results/turn_fit_$1.md
+}
 variant_b8_test() {  # variant_b8_test <name>: its test rows, likewise
   suite_b8 test $1
   compare_b8 test $1
@@ -566,6 +571,75 @@ if want practical_b8_height_norec_seed2; then
   train_b8 practical_b8_height_norec_seed2 $NO_RECOVERY $FAST_INPUT --policy.height_input=true --seed=2
   suite_b8 val practical_b8_height_norec_seed2
   variant_b8_test practical_b8_height_norec_seed2
+fi
+# The chunk's rotation magnified 2.8x (--policy.action_rotation_scale=0.36: the yaw entries' range of the expert's
+# relative chunks onto [-1, 1]) on the adopted recipe's data; seed 1000, then a second seed, then test rows.
+ROTATION="$FAST_INPUT --policy.height_input=true --policy.action_rotation_scale=0.36"
+if want practical_b8_height_norec_rot; then
+  train_b8 practical_b8_height_norec_rot $NO_RECOVERY $ROTATION
+  suite_b8 val practical_b8_height_norec_rot
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_rot_vs_norec.md \
+    --runs="norec=docs/results/validation_practical_b8_height_norec;rot=docs/results/validation_practical_b8_height_norec_rot"
+  turned_targets practical_b8_height_norec_rot
+  turn_fit practical_b8_height_norec $X/practical180_norec
+  turn_fit practical_b8_height_norec_rot $X/practical180_norec
+fi
+if want practical_b8_height_norec_rot_seed1; then
+  train_b8 practical_b8_height_norec_rot_seed1 $NO_RECOVERY $ROTATION --seed=1
+  suite_b8 val practical_b8_height_norec_rot_seed1
+  turn_fit practical_b8_height_norec_rot_seed1 $X/practical180_norec
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_rot_seeds.md \
+    --runs="norec seed1000=docs/results/validation_practical_b8_height_norec;norec seed1=docs/results/validation_practical_b8_height_norec_seed1;\
+rot seed1000=docs/results/validation_practical_b8_height_norec_rot;rot seed1=docs/results/validation_practical_b8_height_norec_rot_seed1"
+fi
+if want practical_b8_height_norec_rot_test; then
+  for name in practical_b8_height_norec_rot practical_b8_height_norec_rot_seed1; do suite_b8 test $name; done
+  bboxpick-compare --out=docs/results/practical_b8_height_norec_rot_vs_norec.md \
+    --runs="norec seed1000=docs/results/practical_b8_height_norec;norec seed1=docs/results/practical_b8_height_norec_seed1;\
+rot seed1000=docs/results/practical_b8_height_norec_rot;rot seed1=docs/results/practical_b8_height_norec_rot_seed1"
+fi
+# The shipped checkpoint's own misses corrected in place (bboxpick-dagger: 20 kept corrections in each of random_id and
+# pile_id, training seeds from 4000), merged after the 180 demos; the adopted recipe trained from scratch on them.
+DAGGER="local/lego_pick_practical_dagger $X/practical180_norec_dagger"
+if want practical_b8_height_norec_dagger; then
+  [ -f $X/practical180_norec_dagger/meta/info.json ] || bboxpick-dagger --policy_path=examples/bbox_diffusion_lego_pick_height \
+    --repo_id=local/lego_pick_practical_dagger --root=$X/practical180_norec_dagger --correction=in_place \
+    --settings=random_id,pile_id --episodes=20 --num_inference_steps=4 --workers=2 --merge_with=$X/practical180_norec
+  train_b8 practical_b8_height_norec_dagger $DAGGER $FAST_INPUT --policy.height_input=true
+  suite_b8 val practical_b8_height_norec_dagger
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_dagger_vs_norec.md \
+    --runs="norec=docs/results/validation_practical_b8_height_norec;dagger=docs/results/validation_practical_b8_height_norec_dagger"
+  turned_targets practical_b8_height_norec_dagger
+  variant_b8_test practical_b8_height_norec_dagger
+fi
+# Both: the corrections' data trained with the magnified rotation (seed 1000); validation rows and the random_id trace.
+if want practical_b8_height_norec_dagger_rot; then
+  train_b8 practical_b8_height_norec_dagger_rot $DAGGER $ROTATION
+  suite_b8 val practical_b8_height_norec_dagger_rot
+  bboxpick-compare --out=docs/results/validation_practical_b8_height_norec_dagger_rot_vs_norec.md \
+    --runs="norec=docs/results/validation_practical_b8_height_norec;dagger=docs/results/validation_practical_b8_height_norec_dagger;\
+dagger_rot=docs/results/validation_practical_b8_height_norec_dagger_rot"
+  turned_targets practical_b8_height_norec_dagger_rot
+fi
+# The expert turns late on the adopted recipe's 180 demos (no recoveries, height input): with the magnified
+# rotation (the turn learned where the brick is visible) and without (the late turn alone); seed 1000.
+LATE_NOREC="local/lego_pick_practical_norec_late $X/practical180_norec_late"
+late_turn_run() {  # late_turn_run <name> [policy options]: trained on the late-turn demos, validation rows
+  local name=$1
+  shift
+  EXPERT_TURN=late practical_data $LATE_NOREC 0
+  train_b8 $name $LATE_NOREC "$@"
+  suite_b8 val $name
+  bboxpick-compare --out=docs/results/validation_${name}_vs_norec.md \
+    --runs="norec=docs/results/validation_practical_b8_height_norec;rot=docs/results/validation_practical_b8_height_norec_rot;\
+$name=docs/results/validation_$name"
+  turned_targets $name
+  # the late expert starts its turn 37-52 frames in (2.2 s at its speed draw), over 13-19 frames
+  TURN_FRAMES=32,40,48 turn_fit $name $X/practical180_norec_late
+}
+if want practical_b8_height_norec_late_rot; then late_turn_run practical_b8_height_norec_late_rot $ROTATION; fi
+if want practical_b8_height_norec_late; then
+  late_turn_run practical_b8_height_norec_late $FAST_INPUT --policy.height_input=true
 fi
 # The recipe with recoveries, its second seed (practical_b8_height_seed1) on the 180 validation scenes (the
 # adoption rule's follow-up in results.md).
