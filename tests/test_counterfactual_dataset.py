@@ -136,6 +136,21 @@ def test_same_options_same_dataset_and_true_labels(tmp_path):
     _check_branch_advantages(b, tmp_path / "b", tmp_path / "advantages.json")
 
 
+@pytest.mark.slow
+def test_first_branch_chunk_moves_the_branch_points_past_the_approach(tmp_path):
+    """Branching from chunk 3 every chunk: the points sit at env steps 36 and 48 (12-step chunks), and
+    the state and chunk at step 36 are those of a run that branched at 0 and 36 (the same seeds)."""
+    options = {"max_points": 2, "samples": 0, "expert": False, "max_steps": 120}
+    early = load_points(_run(tmp_path / "early", branch_every=3, **options).out_dir)
+    late = load_points(_run(tmp_path / "late", branch_every=1, first_branch_chunk=3, **options).out_dir)
+    assert early.step.tolist() == [0, 36] and late.step.tolist() == [36, 48]
+    # chunk 3's state and policy chunk do not depend on whether chunk 0 was branched
+    assert np.allclose(late.state[0], early.state[1], atol=1e-9)
+    assert np.allclose(late.candidates[0, 0], early.candidates[1, 0], atol=1e-9)
+    with pytest.raises(ValueError, match="first_branch_chunk=-1 must be an integer >= 0"):
+        small_config(tmp_path / "bad", first_branch_chunk=-1)
+
+
 def _check_branch_advantages(points, out_dir: Path, path: Path) -> None:
     """bboxpick-branch-advantages on the real success demos: each episode's advantage is its branch's
     return minus the mean return of the policy's own draws (policy, sample1) at its point."""

@@ -5,9 +5,10 @@
 
 The paper's conclusion (section 7) asks for what a real robot cannot give: several actions tried from
 *the same* state, each followed to its outcome. For every episode (setting x seed, training seeds) the
-policy runs closed loop; at every ``branch_every``-th chunk boundary (at most ``max_points`` per
-episode) the simulator is saved (``rl.counterfactual.snapshot``) and each candidate chunk is executed
-from the restored state, after which the policy finishes the episode (``run_branch``). Candidates:
+policy runs closed loop; at every ``branch_every``-th chunk boundary from ``first_branch_chunk`` (at
+most ``max_points`` per episode) the simulator is saved (``rl.counterfactual.snapshot``) and each
+candidate chunk is executed from the restored state, after which the policy finishes the episode
+(``run_branch``). Candidates:
 
 * ``policy``: the chunk the policy samples there (the base rollout then continues with it);
 * ``sample1..K``: ``samples`` more draws from the policy at the same observation;
@@ -77,6 +78,9 @@ class CounterfactualConfig:
     # Chunk boundaries between branch points (1: every chunk), and branch points per episode.
     branch_every: int = 2
     max_points: int = 4
+    # The chunk boundary of the first branch point (0: the episode's start). Later starts put the
+    # branches where the policy misses, past the approach (near the brick) that every candidate shares.
+    first_branch_chunk: int = 0
     # Extra policy samples per branch point.
     samples: int = 2
     # Per-axis perturbations of the policy's chunk, <axis>:<amount> (each tried with + and -).
@@ -102,6 +106,7 @@ class CounterfactualConfig:
             ("episodes", 1),
             ("branch_every", 1),
             ("max_points", 1),
+            ("first_branch_chunk", 0),
             ("samples", 0),
             ("max_steps", 1),
             ("workers", 1),
@@ -149,6 +154,8 @@ class CounterfactualConfig:
         }
         if self.success_demos:  # earlier runs' keys stay valid
             key["success_demos"] = True
+        if self.first_branch_chunk:
+            key["first_branch_chunk"] = self.first_branch_chunk
         return key
 
 
@@ -235,7 +242,12 @@ class EpisodeBrancher:
         self.chunk_index += 1
         gen = torch.Generator().manual_seed(_derived_seed(self.seed, index, 0))
         chunk = policy.predict_action_chunk(stacked, generator=gen)
-        is_point = index % self.cfg.branch_every == 0 and len(self.points) < self.cfg.max_points
+        since_first = index - self.cfg.first_branch_chunk
+        is_point = (
+            since_first >= 0
+            and since_first % self.cfg.branch_every == 0
+            and len(self.points) < self.cfg.max_points
+        )
         if not is_point:
             return chunk
         env = self.env
