@@ -641,6 +641,10 @@ if want practical_b8_height_norec_late_rot; then late_turn_run practical_b8_heig
 if want practical_b8_height_norec_late; then
   late_turn_run practical_b8_height_norec_late $FAST_INPUT --policy.height_input=true
 fi
+# The late turn alone is a candidate (165/180 validation, Wrong 0): its second training seed decides adoption.
+if want practical_b8_height_norec_late_seed1; then
+  late_turn_run practical_b8_height_norec_late_seed1 $FAST_INPUT --policy.height_input=true --seed=1
+fi
 # The recipe with recoveries, its second seed (practical_b8_height_seed1) on the 180 validation scenes (the
 # adoption rule's follow-up in results.md).
 if want practical_b8_height_seed1_val; then
