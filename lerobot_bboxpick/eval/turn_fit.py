@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from lerobot_bboxpick.data.features import EPISODE_SETTING
 from lerobot_bboxpick.geometry import pose9_to_mat
 from lerobot_bboxpick.sim.expert import tcp_yaw
 from lerobot_bboxpick.sim.layouts import SETTINGS, check_setting
@@ -62,7 +63,7 @@ def chunk_turns(
     turns = []
     for episode in range(dataset.meta.total_episodes):
         first, length = int(starts[episode]), int(ends[episode]) - int(starts[episode])
-        setting = SETTINGS[int(dataset[first]["episode.setting"])]
+        setting = SETTINGS[int(dataset.hf_dataset[first][EPISODE_SETTING])]  # the column: no video decode
         if setting not in settings:
             continue
         for frame in frames:

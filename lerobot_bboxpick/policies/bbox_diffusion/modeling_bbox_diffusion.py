@@ -29,7 +29,12 @@ from lerobot.policies.utils import populate_queues
 from lerobot.utils.constants import ACTION, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_bboxpick.geometry import absolute_pose10_torch, mat_to_pose9, relative_pose10_torch
+from lerobot_bboxpick.geometry import (
+    IDENTITY_POSE9,
+    absolute_pose10_torch,
+    mat_to_pose9,
+    relative_pose10_torch,
+)
 from lerobot_bboxpick.latency import fresh_steps, observation_time
 from lerobot_bboxpick.policies.bbox_diffusion.configuration_bbox_diffusion import (
     POSE_DIM,
@@ -71,7 +76,7 @@ class PoseScaler(nn.Module):
         scale[9] = max_width / 2
         offset = torch.zeros(10)
         # (x - offset) / scale = identity + (x - identity) / scale  <=>  offset = identity * (1 - scale)
-        offset[3:9] = torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0]) * (1.0 - rotation_scale)
+        offset[3:9] = torch.from_numpy(IDENTITY_POSE9[3:]).float() * (1.0 - rotation_scale)
         offset[9] = max_width / 2
         self.register_buffer("scale", scale, persistent=False)
         self.register_buffer("offset", offset, persistent=False)
